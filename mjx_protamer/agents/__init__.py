@@ -1,0 +1,1 @@
+"""Learners: DDPG (the backbone) and Deep COACH."""

@@ -1,0 +1,1 @@
+"""Deep COACH: a Gaussian policy learned from corrective human feedback."""

@@ -1,0 +1,1 @@
+"""Pure-JAX DDPG: networks, replay, noise, losses and the jitted train loop."""

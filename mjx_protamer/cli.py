@@ -1,0 +1,46 @@
+"""The `protamer` command line. Each subcommand lives in a module with `register(subparsers)`.
+
+Modules import their heavy dependencies (JAX, torch) inside the handler, so `protamer --help` is fast
+and the voice commands never import JAX.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from mjx_protamer.config import ConfigError
+
+# Each module registers one or more subcommands; the order is the order shown in --help.
+COMMAND_MODULES = (
+    "mjx_protamer.commands.bench",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="protamer",
+        description="Self-touch exploration in MuJoCo-MJX with human (voice) feedback.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.handler(args) or 0)
+    except ConfigError as e:
+        print(f"protamer: configuration error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("protamer: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the `protamer` command line; each module has `register(subparsers)`."""

@@ -1,0 +1,180 @@
+"""Frozen-dataclass configuration loaded from YAML, validated with errors that name the field.
+
+Every config in the project is a (nested) frozen dataclass. `load_config(Cls, path, overrides)`
+reads `configs/*.yaml`, applies `a.b.c=value` overrides from the command line and builds the
+dataclass, refusing unknown keys, wrong types and values outside the allowed range. Field-level
+rules live next to the fields, in each dataclass's `validate()` method, which raises
+`ConfigError` through `check()`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from pathlib import Path
+from typing import Any, Literal, TypeVar, get_args, get_origin
+
+import yaml
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A configuration value is missing, unknown or invalid; the message names the field."""
+
+
+def check(condition: bool, field: str, message: str) -> None:
+    """Raise ConfigError for `field` unless `condition` holds."""
+    if not condition:
+        raise ConfigError(f"config field '{field}': {message}")
+
+
+def _type_name(tp: Any) -> str:
+    if get_origin(tp) is Literal:
+        return "one of " + ", ".join(repr(a) for a in get_args(tp))
+    return getattr(tp, "__name__", str(tp))
+
+
+def _coerce(value: Any, tp: Any, field: str) -> Any:
+    """Convert a YAML value to the annotated type, or raise a ConfigError naming the field."""
+    origin = get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        options = get_args(tp)
+        if value is None and type(None) in options:
+            return None
+        errors = []
+        for option in options:
+            if option is type(None):
+                continue
+            try:
+                return _coerce(value, option, field)
+            except ConfigError as e:
+                errors.append(str(e))
+        raise ConfigError(f"config field '{field}': {value!r} fits none of {options}")
+    if origin is Literal:
+        allowed = get_args(tp)
+        if value not in allowed:
+            raise ConfigError(
+                f"config field '{field}': {value!r} is not allowed; allowed values: "
+                + ", ".join(repr(a) for a in allowed)
+            )
+        return value
+    if origin is tuple:
+        args = get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"config field '{field}': expected a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(v, args[0], f"{field}[{i}]") for i, v in enumerate(value))
+        if len(args) != len(value):
+            raise ConfigError(f"config field '{field}': expected {len(args)} items, got {len(value)}")
+        return tuple(_coerce(v, a, f"{field}[{i}]") for i, (v, a) in enumerate(zip(args, value)))
+    if dataclasses.is_dataclass(tp):
+        if isinstance(value, tp):
+            return value
+        if not isinstance(value, dict):
+            raise ConfigError(f"config field '{field}': expected a mapping, got {value!r}")
+        return _build(tp, value, prefix=f"{field}.")
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"config field '{field}': expected true or false, got {value!r}")
+    if tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+        raise ConfigError(f"config field '{field}': expected an integer, got {value!r}")
+    if tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"config field '{field}': expected a number, got {value!r}")
+    if tp is str:
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"config field '{field}': expected a string, got {value!r}")
+    raise ConfigError(f"config field '{field}': unsupported type {_type_name(tp)}")
+
+
+def _build(cls: type[T], raw: dict[str, Any], prefix: str = "") -> T:
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(raw) - names)
+    if unknown:
+        raise ConfigError(
+            f"unknown config key(s) {', '.join(prefix + k for k in unknown)}; "
+            f"allowed keys under '{prefix.rstrip('.') or cls.__name__}': {', '.join(sorted(names))}"
+        )
+    kwargs = {k: _coerce(v, hints[k], prefix + k) for k, v in raw.items()}
+    obj = cls(**kwargs)
+    validate(obj, prefix)
+    return obj
+
+
+def validate(obj: Any, prefix: str = "") -> None:
+    """Run `validate()` on a config dataclass and on its nested config dataclasses."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            validate(value, prefix + f.name + ".")
+    hook = getattr(obj, "validate", None)
+    if hook is not None:
+        try:
+            hook()
+        except ConfigError as e:
+            if prefix and "config field '" in str(e):
+                raise ConfigError(str(e).replace("config field '", f"config field '{prefix}", 1)) from None
+            raise
+
+
+def _parse_scalar(text: str) -> Any:
+    return yaml.safe_load(text)
+
+
+def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Apply `a.b=value` overrides (values parsed as YAML) to a nested dict, in place."""
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"override {item!r} must look like key.sub=value")
+        key, text = item.split("=", 1)
+        parts = key.strip().split(".")
+        node = raw
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+            if not isinstance(node, dict):
+                raise ConfigError(f"override {item!r}: '{p}' is not a section")
+        node[parts[-1]] = _parse_scalar(text)
+    return raw
+
+
+def to_dict(obj: Any) -> dict[str, Any]:
+    """A plain dict of a config dataclass (tuples become lists), for saving next to a run."""
+    def conv(v: Any) -> Any:
+        if dataclasses.is_dataclass(v):
+            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
+        if isinstance(v, tuple):
+            return [conv(x) for x in v]
+        return v
+    return conv(obj)
+
+
+def from_dict(cls: type[T], raw: dict[str, Any] | None) -> T:
+    """Build and validate a config dataclass from a nested dict (missing keys take defaults)."""
+    return _build(cls, dict(raw or {}))
+
+
+def load_config(cls: type[T], path: str | Path | None = None, overrides: list[str] | None = None) -> T:
+    """Load `cls` from a YAML file (or its defaults when path is None) with overrides applied."""
+    raw: dict[str, Any] = {}
+    if path is not None:
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"config file {path} does not exist")
+        try:
+            raw = yaml.safe_load(path.read_text()) or {}
+        except yaml.YAMLError as e:
+            raise ConfigError(f"config file {path} is not valid YAML: {e}") from None
+        if not isinstance(raw, dict):
+            raise ConfigError(f"config file {path} must hold a mapping at the top level")
+    apply_overrides(raw, list(overrides or []))
+    return from_dict(cls, raw)

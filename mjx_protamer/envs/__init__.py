@@ -1,0 +1,1 @@
+"""The self-touch environment: body model, touch, regions, reward, MJX env and NumPy twin."""

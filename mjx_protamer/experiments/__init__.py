@@ -1,0 +1,1 @@
+"""Experiments: metrics, runs that reproduce the paper's table and figures, plots."""

@@ -1,0 +1,1 @@
+"""The human side: feedback events, the queue, credit assignment, reward models, teachers."""
