@@ -1,9 +1,13 @@
 """A bounded feedback queue between host processes (keyboard, voice, teachers) and the learner.
 
 Producers call `put(event)` from any process: the event is validated, and a full queue counts an
-overflow instead of blocking or dropping silently. The learner calls `drain()` between jitted chunks;
+overflow instead of blocking or dropping silently. The learner calls `drain(log)` between jitted chunks;
 every accepted event goes to an append-only JSONL log (flushed and fsynced per line, so a crash
-loses at most the line being written), rejected ones to the log with their reason.
+loses at most the line being written). Events rejected by a producer travel to the learner on a small
+side queue with their reason and are logged by `drain` too; overflows since the last drain are logged as
+one "overflow" record. Nothing is dropped without a count and a log line.
+
+Pure Python (no JAX): the audio front end imports this module.
 """
 
 from __future__ import annotations
@@ -14,12 +18,18 @@ import os
 import queue as queue_lib
 import time
 from pathlib import Path
+from typing import Callable
 
 from mjx_protamer.human.events import FeedbackEvent, InvalidFeedback, validate_event
 
 
 class FeedbackLog:
-    """Append-only JSONL log of accepted and rejected feedback; each line is durable once written."""
+    """Append-only JSONL log of accepted and rejected feedback; each line is durable once written.
+
+    Record kinds (`status`): "accepted" (the event's fields + `step`, the env step it was drained at),
+    "rejected" (`reason`, `raw`), "overflow" (`count` new since the last record, `total`), and free-form
+    "note" records (run start/end).
+    """
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -37,79 +47,150 @@ class FeedbackLog:
         self._write(record)
 
     def rejected(self, raw: object, reason: str) -> None:
-        self._write({"status": "rejected", "reason": reason, "received": time.time(), "raw": repr(raw)})
+        raw_text = raw if isinstance(raw, str) else repr(raw)
+        self._write({"status": "rejected", "reason": reason, "received": time.time(), "raw": raw_text})
+
+    def overflow(self, count: int, total: int) -> None:
+        self._write({"status": "overflow", "count": int(count), "total": int(total), "received": time.time()})
+
+    def note(self, **fields) -> None:
+        self._write({"status": "note", "received": time.time(), **fields})
 
     def close(self) -> None:
-        self._fh.close()
+        if not self._fh.closed:
+            self._fh.close()
+
+    def __enter__(self) -> "FeedbackLog":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @staticmethod
+    def records(path: str | Path) -> list[dict]:
+        """Every complete record of a log; a torn last line (a crash mid-write) is skipped."""
+        out = []
+        for line in Path(path).read_text(encoding="utf-8").splitlines():
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+        return out
 
     @staticmethod
     def read(path: str | Path) -> list[FeedbackEvent]:
         """The accepted events of a log; a torn last line (a crash mid-write) is skipped."""
-        events = []
-        for line in Path(path).read_text(encoding="utf-8").splitlines():
-            try:
-                record = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if record.get("status") == "accepted":
-                events.append(FeedbackEvent.from_json(line))
-        return events
+        return [
+            FeedbackEvent.from_json(json.dumps(r))
+            for r in FeedbackLog.records(path)
+            if r.get("status") == "accepted"
+        ]
 
 
 class FeedbackQueue:
     """multiprocessing queue with validation, overflow accounting and a drain for the learner.
 
-    Picklable: pass it to producer processes (`multiprocessing.Process(args=(q,))`).
+    Picklable: pass it to producer processes (`multiprocessing.Process(args=(q,))`). `clock` is what
+    "now" means for the future-timestamp check: the wall clock by default, a `VirtualClock` for
+    simulated runs (it is shared across processes).
     """
 
-    def __init__(self, maxsize: int = 256, ctx: mp.context.BaseContext | None = None):
+    def __init__(self, maxsize: int = 256, ctx: mp.context.BaseContext | None = None,
+                 clock: Callable[[], float] | None = None, reject_maxsize: int = 64,
+                 flush_timeout: float = 1.0):
         if maxsize < 1:
             raise ValueError(f"maxsize must be >= 1, got {maxsize}")
         ctx = ctx or mp.get_context("spawn")
         self.maxsize = maxsize
+        self.clock = clock
+        self.flush_timeout = flush_timeout
         self._q = ctx.Queue(maxsize)
+        self._rejects = ctx.Queue(reject_maxsize)
         self._overflow = ctx.Value("i", 0)
         self._rejected = ctx.Value("i", 0)
         self._accepted = ctx.Value("i", 0)
+        self._taken = ctx.Value("i", 0)
+        self._rejects_sent = ctx.Value("i", 0)
+        self._rejects_taken = ctx.Value("i", 0)
+        self._overflow_logged = ctx.Value("i", 0)
+        self.last_reason: str | None = None  # producer-local: why the last put() returned False
 
-    def put(self, event: FeedbackEvent) -> bool:
-        """Validate and enqueue without blocking; False (and counted) when invalid or full."""
+    def _now(self) -> float:
+        return time.time() if self.clock is None else self.clock()
+
+    @staticmethod
+    def _bump(counter, by: int = 1) -> None:
+        with counter.get_lock():
+            counter.value += by
+
+    def _reject(self, raw: object, reason: str) -> None:
+        self._bump(self._rejected)
+        self.last_reason = reason
         try:
-            validate_event(event)
-        except InvalidFeedback:
-            with self._rejected.get_lock():
-                self._rejected.value += 1
-            return False
+            self._rejects.put_nowait((raw if isinstance(raw, str) else repr(raw), reason))
+            self._bump(self._rejects_sent)
+        except queue_lib.Full:
+            pass  # still counted in `rejected`; the learner logs the shortfall on drain
+
+    def offer(self, event: FeedbackEvent) -> tuple[bool, str | None]:
+        """Validate and enqueue without blocking: (True, None), or (False, reason) - counted either way."""
+        try:
+            validate_event(event, now=self._now())
+        except InvalidFeedback as e:
+            self._reject(event, str(e))
+            return False, str(e)
         try:
             self._q.put_nowait(event)
         except queue_lib.Full:
-            with self._overflow.get_lock():
-                self._overflow.value += 1
-            return False
-        with self._accepted.get_lock():
-            self._accepted.value += 1
-        return True
+            self._bump(self._overflow)
+            self.last_reason = f"queue full ({self.maxsize} events waiting): overflow"
+            return False, self.last_reason
+        self._bump(self._accepted)
+        return True, None
+
+    def put(self, event: FeedbackEvent) -> bool:
+        """Validate and enqueue without blocking; False (and counted) when invalid or full."""
+        return self.offer(event)[0]
+
+    def _take(self, q, sent, taken, max_items: int | None, timeout: float) -> list:
+        """Everything the producers have put so far (waiting up to flush_timeout for items still in a
+        producer's feeder thread), then whatever else is there already."""
+        out = []
+        while max_items is None or len(out) < max_items:
+            pending = sent.value - taken.value
+            wait = self.flush_timeout if pending > 0 else (timeout if not out else 0.0)
+            try:
+                item = q.get(timeout=wait) if wait > 0 else q.get_nowait()
+            except queue_lib.Empty:
+                break
+            self._bump(taken)
+            out.append(item)
+        return out
 
     def drain(self, log: FeedbackLog | None = None, step: int | None = None, max_items: int | None = None,
               timeout: float = 0.0) -> list[FeedbackEvent]:
-        """Take what is queued now (re-validated against the receiver's clock), logging each."""
+        """Take what is queued now (re-validated against the receiver's clock), logging each accepted
+        and rejected event and any overflow since the last drain."""
+        for raw, reason in self._take(self._rejects, self._rejects_sent, self._rejects_taken, None, 0.0):
+            if log is not None:
+                log.rejected(raw, reason)
         out: list[FeedbackEvent] = []
-        while max_items is None or len(out) < max_items:
+        for event in self._take(self._q, self._accepted, self._taken, max_items, timeout):
             try:
-                event = self._q.get(timeout=timeout) if timeout > 0 and not out else self._q.get_nowait()
-            except queue_lib.Empty:
-                break
-            try:
-                validate_event(event)
+                validate_event(event, now=self._now())
             except InvalidFeedback as e:
-                with self._rejected.get_lock():
-                    self._rejected.value += 1
+                self._bump(self._rejected)
                 if log is not None:
                     log.rejected(event, str(e))
                 continue
             if log is not None:
                 log.accepted(event, step=step)
             out.append(event)
+        total = self._overflow.value
+        new = total - self._overflow_logged.value
+        if new > 0 and log is not None:
+            log.overflow(new, total)
+            self._overflow_logged.value = total
         return out
 
     @property
@@ -125,4 +206,5 @@ class FeedbackQueue:
         return self._accepted.value
 
     def stats(self) -> dict[str, int]:
-        return {"accepted": self.accepted, "rejected": self.rejected, "overflow": self.overflow}
+        return {"accepted": self.accepted, "rejected": self.rejected, "overflow": self.overflow,
+                "waiting": self._accepted.value - self._taken.value}

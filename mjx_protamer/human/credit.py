@@ -1,0 +1,134 @@
+"""Credit assignment: which env steps a feedback event is about, and with what weight. No JAX.
+
+Two schemes (`CreditConfig.scheme`):
+
+- "step_window", the paper authors' code: the event lands on the step being shown at its time
+  (`StepClock.step_at(event.t_start)`, step k); steps k, k-1, ..., k-14 get weights 0.9^0, ..., 0.9^14.
+- "time_window", Deep TAMER as published (Warnell et al. 2018): the human's delay is Uniform[0.2, 4.0] s,
+  so the probability that feedback at time t is about step i, which spans [s_i, e_i), is
+  |[s_i, e_i) ∩ [t - 4.0, t - 0.2]| / 3.8. Steps with weight 0 are not credited.
+
+The event's time is `t_start`: the onset of the key press or of the utterance (the reaction), not the
+end of a long sentence. Either scheme accepts at most one event per `min_interval_steps` (the authors'
+"feedback accepted at most every 5 steps"), measured between the steps the events land on; a dropped
+event is reported with its reason. The weights are the `w` of the weighted squared loss
+`w * (r_hat(s, a) - h)^2` of the reward model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import numpy as np
+
+from mjx_protamer.config import check
+from mjx_protamer.human.clock import StepClock
+from mjx_protamer.human.events import FeedbackEvent
+
+
+@dataclasses.dataclass(frozen=True)
+class CreditConfig:
+    scheme: Literal["step_window", "time_window"] = "step_window"
+    window_steps: int = 15  # step_window: how many steps back
+    decay: float = 0.9  # step_window: weight 0.9^i for the i-th step back
+    delay_min_s: float = 0.2  # time_window: human delay ~ Uniform[delay_min_s, delay_max_s]
+    delay_max_s: float = 4.0
+    min_interval_steps: int = 5  # at most one accepted event per this many steps
+
+    def validate(self) -> None:
+        check(self.window_steps >= 1, "window_steps", f"must be >= 1, got {self.window_steps}")
+        check(0.0 < self.decay <= 1.0, "decay", f"must be in (0, 1], got {self.decay}")
+        check(self.delay_min_s >= 0.0, "delay_min_s", f"must be >= 0, got {self.delay_min_s}")
+        check(self.delay_max_s > self.delay_min_s, "delay_max_s",
+              f"must be > delay_min_s ({self.delay_min_s}), got {self.delay_max_s}")
+        check(self.min_interval_steps >= 0, "min_interval_steps", f"must be >= 0, got {self.min_interval_steps}")
+
+
+def step_window_weights(window: int = 15, decay: float = 0.9) -> np.ndarray:
+    """Weights of the steps k, k-1, ..., k-window+1 for feedback landing on step k."""
+    return decay ** np.arange(window, dtype=np.float64)
+
+
+def time_window_weight(start: float, end: float, t_feedback: float,
+                       delay_min: float = 0.2, delay_max: float = 4.0) -> float:
+    """Overlap of the step span [start, end) with [t - delay_max, t - delay_min], over the window length."""
+    lo, hi = t_feedback - delay_max, t_feedback - delay_min
+    return max(0.0, min(end, hi) - max(start, lo)) / (delay_max - delay_min)
+
+
+@dataclasses.dataclass(frozen=True)
+class Credit:
+    """An accepted event and the (step, weight) pairs it credits."""
+
+    event: FeedbackEvent
+    step: int  # the step the event lands on (shown at its time)
+    steps: tuple[int, ...]
+    weights: tuple[float, ...]
+
+
+class CreditAssigner:
+    """Turns events into credited steps on a StepClock, enforcing the minimum interval."""
+
+    def __init__(self, config: CreditConfig, clock: StepClock):
+        self.config = config
+        self.clock = clock
+        self.last_step: int | None = None
+        self.dropped: dict[str, int] = {}
+
+    def _drop(self, reason: str) -> tuple[None, str]:
+        self.dropped[reason] = self.dropped.get(reason, 0) + 1
+        return None, reason
+
+    def assign(self, event: FeedbackEvent) -> tuple[Credit | None, str | None]:
+        """(Credit, None) or (None, reason) when the event credits nothing or comes too soon."""
+        cfg = self.config
+        step = self.clock.step_at(event.t_start)
+        if step is None:
+            return self._drop("before the first remembered step")
+        if self.last_step is not None and step - self.last_step < cfg.min_interval_steps:
+            return self._drop(f"within {cfg.min_interval_steps} steps of the previous feedback")
+        steps, starts, ends = self.clock.spans()
+        if cfg.scheme == "step_window":
+            w = step_window_weights(cfg.window_steps, cfg.decay)
+            known = set(steps)
+            pairs = [(step - i, float(w[i])) for i in range(cfg.window_steps) if step - i in known]
+        else:
+            pairs = []
+            for s, a, b in zip(steps, starts, ends):
+                if a > event.t_start - cfg.delay_min_s:
+                    break
+                wt = time_window_weight(a, b, event.t_start, cfg.delay_min_s, cfg.delay_max_s)
+                if wt > 0:
+                    pairs.append((s, wt))
+        if not pairs:
+            return self._drop("no remembered step inside the credit window")
+        self.last_step = step
+        return Credit(event, step, tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)), None
+
+
+class StepHistory:
+    """The (obs, action) of the last `capacity` steps of the watched env, by global step (host NumPy)."""
+
+    def __init__(self, capacity: int, obs_size: int, action_size: int):
+        self.capacity = capacity
+        self.obs = np.zeros((capacity, obs_size), np.float32)
+        self.action = np.zeros((capacity, action_size), np.float32)
+        self.step = np.full((capacity,), -1, np.int64)
+
+    def record(self, first_step: int, obs: np.ndarray, action: np.ndarray) -> None:
+        n = len(obs)
+        idx = (first_step + np.arange(n)) % self.capacity
+        self.obs[idx] = obs
+        self.action[idx] = action
+        self.step[idx] = first_step + np.arange(n)
+
+    def samples(self, credit: Credit) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(obs, action, weight, target) rows for a credit; steps no longer remembered are skipped."""
+        steps = np.asarray(credit.steps, np.int64)
+        idx = steps % self.capacity
+        ok = self.step[idx] == steps
+        idx = idx[ok]
+        w = np.asarray(credit.weights, np.float32)[ok]
+        h = np.full(len(idx), credit.event.value, np.float32)
+        return self.obs[idx], self.action[idx], w, h

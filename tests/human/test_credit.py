@@ -1,0 +1,103 @@
+"""Credit weights of both schemes against hand-computed values; the minimum interval; the step clock."""
+
+import numpy as np
+import pytest
+
+from mjx_protamer.human.clock import StepClock
+from mjx_protamer.human.credit import (CreditAssigner, CreditConfig, StepHistory, step_window_weights,
+                                       time_window_weight)
+from mjx_protamer.human.events import FeedbackEvent
+
+
+def at(t, value=1.0):
+    return FeedbackEvent(t, t, "simulated", value)
+
+
+def test_step_window_weights_hand_computed():
+    w = step_window_weights(15, 0.9)
+    assert len(w) == 15
+    assert w[0] == 1.0 and w[1] == pytest.approx(0.9) and w[2] == pytest.approx(0.81)
+    assert w[14] == pytest.approx(0.2287679245, rel=1e-9)  # 0.9^14
+
+
+def test_time_window_weight_hand_computed():
+    # Feedback at t=3.0 looks back at [-1.0, 2.8]; 3.8 s long.
+    assert time_window_weight(0.0, 0.5, 3.0) == pytest.approx(0.5 / 3.8)
+    assert time_window_weight(2.5, 3.0, 3.0) == pytest.approx(0.3 / 3.8)  # only [2.5, 2.8]
+    assert time_window_weight(2.8, 3.0, 3.0) == 0.0  # inside the 0.2 s minimum delay
+    assert time_window_weight(-1.5, -0.5, 3.0) == pytest.approx(0.5 / 3.8)  # only [-1.0, -0.5]
+    assert time_window_weight(-3.0, -1.0, 3.0) == 0.0
+
+
+def test_step_window_credit_lands_on_the_shown_step():
+    clock = StepClock(dt=0.005)
+    clock.record_chunk(0, 100, t0=100.0)
+    ca = CreditAssigner(CreditConfig(scheme="step_window"), clock)
+    credit, why = ca.assign(at(100.0 + 0.005 * 50 + 0.001))
+    assert why is None and credit.step == 50
+    assert credit.steps == tuple(range(50, 35, -1))
+    np.testing.assert_allclose(credit.weights, 0.9 ** np.arange(15))
+
+
+def test_step_window_near_the_start_credits_only_existing_steps():
+    clock = StepClock(dt=0.005)
+    clock.record_chunk(0, 10, t0=0.0)
+    credit, _ = CreditAssigner(CreditConfig(), clock).assign(at(0.016))
+    assert credit.steps == (3, 2, 1, 0)
+    np.testing.assert_allclose(credit.weights, [1.0, 0.9, 0.81, 0.729])
+
+
+def test_minimum_interval_between_accepted_feedbacks():
+    clock = StepClock(dt=1.0)
+    clock.record_chunk(0, 100, t0=0.0)
+    ca = CreditAssigner(CreditConfig(min_interval_steps=5), clock)
+    assert ca.assign(at(50.5))[0].step == 50
+    credit, why = ca.assign(at(54.5))
+    assert credit is None and "within 5 steps" in why
+    assert ca.assign(at(55.5))[0].step == 55
+    assert ca.dropped == {"within 5 steps of the previous feedback": 1}
+
+
+def test_time_window_credit_hand_computed():
+    clock = StepClock(dt=0.5)
+    clock.record_chunk(0, 12, t0=0.0)  # step i spans [0.5 i, 0.5 i + 0.5)
+    ca = CreditAssigner(CreditConfig(scheme="time_window", min_interval_steps=0), clock)
+    credit, _ = ca.assign(at(3.0))  # window [-1.0, 2.8]
+    assert credit.steps == (0, 1, 2, 3, 4, 5)
+    np.testing.assert_allclose(credit.weights, [0.5 / 3.8] * 5 + [0.3 / 3.8])
+    credit, _ = ca.assign(at(5.0))  # window [1.0, 4.8]: steps 2..8 whole, step 9 for 0.3 s
+    assert credit.steps == tuple(range(2, 10))
+    np.testing.assert_allclose(credit.weights, [0.5 / 3.8] * 7 + [0.3 / 3.8])
+    assert sum(credit.weights) == pytest.approx(1.0)
+
+
+def test_time_window_at_200hz_covers_760_steps():
+    clock = StepClock(dt=0.005, capacity=2048)
+    clock.record_chunk(0, 1000, t0=0.0)
+    credit, _ = CreditAssigner(CreditConfig(scheme="time_window"), clock).assign(at(4.5))
+    assert len(credit.steps) == 760 and credit.steps[0] == 100 and credit.steps[-1] == 859
+    assert sum(credit.weights) == pytest.approx(1.0)
+
+
+def test_step_clock_pause_between_chunks_does_not_stretch_spans():
+    clock = StepClock(dt=0.1)
+    clock.record_chunk(0, 3, t0=0.0)
+    clock.record_chunk(3, 2, t0=10.0)  # a 9.7 s pause
+    steps, starts, ends = clock.spans()
+    assert steps == [0, 1, 2, 3, 4]
+    np.testing.assert_allclose(ends, [0.1, 0.2, 0.3, 10.1, 10.2])
+    assert clock.step_at(5.0) == 2 and clock.step_at(-1.0) is None
+    with pytest.raises(ValueError):
+        clock.record_chunk(4, 1, t0=11.0)
+
+
+def test_step_history_samples_skip_forgotten_steps():
+    hist = StepHistory(capacity=8, obs_size=2, action_size=1)
+    hist.record(0, np.arange(24, dtype=np.float32).reshape(12, 2), np.arange(12, dtype=np.float32)[:, None])
+    clock = StepClock(dt=1.0)
+    clock.record_chunk(0, 12, t0=0.0)
+    credit, _ = CreditAssigner(CreditConfig(), clock).assign(at(11.5, value=-1.0))
+    obs, act, w, h = hist.samples(credit)
+    assert act[:, 0].tolist() == [11, 10, 9, 8, 7, 6, 5, 4]  # steps 0..3 were overwritten
+    np.testing.assert_allclose(w, 0.9 ** np.arange(8), rtol=1e-6)
+    assert (h == -1.0).all()
