@@ -1,0 +1,99 @@
+"""DDPG hyper-parameters and the run settings of batched training, as validated frozen dataclasses.
+
+The defaults of `DDPGConfig` are the paper's reference learner (spec, "The reference learners"): actor and
+critic 400-300, Adam 1e-3 both, gamma 0.99, tau 0.001, batch 64, replay 1e5, OU noise theta 0.15 sigma 0.6.
+`TrainConfig` says how the learner meets the env: how many envs step together, for how long, how many
+gradient updates per vectorised env step, and how the run is cut into jitted chunks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from mjx_protamer.config import check
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    kind: Literal["ou", "gaussian", "none"] = "ou"
+    # Ornstein-Uhlenbeck with dt = 1: x' = x + theta (mu - x) + sigma N(0, 1), one process per env and per
+    # action dim, reset at episode start. Stationary std = sigma / sqrt(2 theta - theta^2) (1.14 here).
+    theta: float = 0.15
+    sigma: float = 0.6  # for "gaussian": the std of the independent per-step noise
+    mu: float = 0.0
+
+    def validate(self) -> None:
+        check(0.0 < self.theta <= 1.0, "theta", f"must be in (0, 1], got {self.theta}")
+        check(self.sigma >= 0.0, "sigma", f"must be >= 0, got {self.sigma}")
+
+
+@dataclass(frozen=True)
+class DDPGConfig:
+    actor_hidden: tuple[int, ...] = (400, 300)
+    critic_hidden: tuple[int, ...] = (400, 300)  # the action enters at the second layer
+    actor_lr: float = 1e-3
+    critic_lr: float = 1e-3
+    gamma: float = 0.99
+    tau: float = 0.001
+    batch_size: int = 64
+    replay_size: int = 100_000
+    # Sample-time reward: alpha * (reward_terms @ env weights) + beta * human_reward_fn(params, obs, action).
+    reward_alpha: float = 1.0
+    reward_beta: float = 0.1
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+
+    def validate(self) -> None:
+        check(len(self.actor_hidden) >= 1 and min(self.actor_hidden) > 0, "actor_hidden",
+              f"needs at least one positive layer width, got {self.actor_hidden}")
+        check(len(self.critic_hidden) >= 2 and min(self.critic_hidden) > 0, "critic_hidden",
+              f"needs at least two positive layer widths (the action enters the second), got {self.critic_hidden}")
+        check(self.actor_lr > 0, "actor_lr", f"must be > 0, got {self.actor_lr}")
+        check(self.critic_lr > 0, "critic_lr", f"must be > 0, got {self.critic_lr}")
+        check(0.0 <= self.gamma < 1.0, "gamma", f"must be in [0, 1), got {self.gamma}")
+        check(0.0 < self.tau <= 1.0, "tau", f"must be in (0, 1], got {self.tau}")
+        check(self.batch_size >= 1, "batch_size", f"must be >= 1, got {self.batch_size}")
+        check(self.replay_size >= self.batch_size, "replay_size",
+              f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    seed: int = 0
+    num_envs: int = 1
+    episode_length: int = 1000
+    total_env_steps: int = 20_000  # over all envs; rounded up to whole chunks
+    warmup_env_steps: int = 1_000  # uniform random actions, no updates, before learning starts
+    updates_per_step: int = 1  # gradient updates per vectorised env step (one step of every env)
+    chunk_steps: int = 1_000  # vectorised env steps per jitted chunk; host work happens between chunks
+    checkpoint_every_chunks: int = 1
+    num_devices: int = 0  # data-parallel devices to shard over; 0 = all of jax.devices()
+    eval_episodes: int = 10
+
+    def validate(self) -> None:
+        check(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
+        check(self.episode_length >= 1, "episode_length", f"must be >= 1, got {self.episode_length}")
+        check(self.total_env_steps >= self.num_envs, "total_env_steps",
+              f"must be >= num_envs ({self.num_envs}), got {self.total_env_steps}")
+        check(self.warmup_env_steps >= 0, "warmup_env_steps", f"must be >= 0, got {self.warmup_env_steps}")
+        check(self.updates_per_step >= 0, "updates_per_step", f"must be >= 0, got {self.updates_per_step}")
+        check(self.chunk_steps >= 1, "chunk_steps", f"must be >= 1, got {self.chunk_steps}")
+        check(self.checkpoint_every_chunks >= 1, "checkpoint_every_chunks",
+              f"must be >= 1, got {self.checkpoint_every_chunks}")
+        check(self.num_devices >= 0, "num_devices", f"must be >= 0, got {self.num_devices}")
+        check(self.eval_episodes >= 1, "eval_episodes", f"must be >= 1, got {self.eval_episodes}")
+
+    @property
+    def iterations(self) -> int:
+        """Vectorised env steps, rounded up to whole chunks."""
+        per_chunk = self.chunk_steps
+        steps = -(-self.total_env_steps // self.num_envs)
+        return -(-steps // per_chunk) * per_chunk
+
+    @property
+    def num_chunks(self) -> int:
+        return self.iterations // self.chunk_steps
+
+    @property
+    def warmup_iterations(self) -> int:
+        return -(-self.warmup_env_steps // self.num_envs)

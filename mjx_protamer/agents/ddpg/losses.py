@@ -1,0 +1,53 @@
+"""DDPG's pure pieces: the sample-time reward, the critic and actor losses, the soft target update."""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+
+from mjx_protamer.agents.ddpg.replay import Transition
+
+# human_reward_fn(human_params, obs (B, obs), action (B, act)) -> (B,) predicted human reward.
+HumanRewardFn = Callable[[Any, jax.Array, jax.Array], jax.Array]
+
+
+def relabel(
+    batch: Transition,
+    weights: jax.Array,
+    alpha: float,
+    beta: float,
+    human_reward_fn: HumanRewardFn | None = None,
+    human_params: Any = None,
+) -> jax.Array:
+    """The reward of sampled transitions: alpha * terms @ weights + beta * human_reward_fn(params, s, a).
+
+    Computed at sample time so that stored transitions always see the current human-reward model.
+    """
+    reward = alpha * (batch.reward_terms @ weights)
+    if human_reward_fn is not None:
+        human = human_reward_fn(human_params, batch.obs, batch.action)
+        reward = reward + beta * jnp.reshape(human, reward.shape)
+    return reward
+
+
+def critic_loss(critic_params, critic_apply, batch: Transition, target_q: jax.Array):
+    """Mean squared TD error against a fixed target; returns (loss, mean Q)."""
+    q = critic_apply(critic_params, batch.obs, batch.action)
+    return jnp.mean((q - target_q) ** 2), jnp.mean(q)
+
+
+def td_target(reward, next_q, terminal, gamma: float) -> jax.Array:
+    """y = r + gamma * (1 - terminal) * Q'(s', mu'(s')); a time-limit truncation is not terminal."""
+    return jax.lax.stop_gradient(reward + gamma * (1.0 - terminal) * next_q)
+
+
+def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.Array):
+    """Deterministic policy gradient: maximise Q(s, mu(s))."""
+    return -jnp.mean(critic_apply(critic_params, obs, actor_apply(actor_params, obs)))
+
+
+def soft_update(target, online, tau: float):
+    """Polyak averaging: target <- tau * online + (1 - tau) * target."""
+    return jax.tree.map(lambda t, o: (1.0 - tau) * t + tau * o, target, online)

@@ -1,0 +1,292 @@
+"""DDPG in pure JAX: a batch of envs, a device-resident replay, the whole train step in one jit.
+
+Shaped like PureJaxRL. `make_train(config, env)` returns pure functions:
+
+- `init(rng) -> TrainState`: networks, optimisers, targets, env batch, noise, empty replay;
+- `train_chunk(train_state, human_params) -> (train_state, metrics)`: `chunk_steps` iterations under
+  `lax.scan`; an iteration steps every env once (`_env_step`) and then makes `updates_per_step` gradient
+  updates (`_update`: critic, actor, soft target update). Jitted once; `human_params` is an argument, so a
+  new human-reward model never recompiles. The host (logging, progress, checkpoints) runs between chunks;
+- `train(rng, human_params=None) -> (train_state, metrics per chunk)`: init and every chunk in one pure
+  function, to `jax.jit(jax.vmap(train))` over seeds (single device only).
+
+Data parallelism: with more than one device the env batch, the replay and the per-update minibatch are split
+over a 1-D mesh (axis "data") with `shard_map`; parameters are replicated and gradients are averaged with
+`pmean`, so every device applies the same update. The same config runs on 1 CPU or on N GPUs.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from flax import struct
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from mjx_protamer.agents.ddpg import losses, noise, replay
+from mjx_protamer.agents.ddpg.losses import HumanRewardFn
+from mjx_protamer.agents.ddpg.networks import Actor, Critic
+from mjx_protamer.config import ConfigError
+from mjx_protamer.envs.base import State
+from mjx_protamer.envs.wrappers import wrap_for_training
+
+AXIS = "data"
+
+
+@struct.dataclass
+class TrainState:
+    actor_params: Any
+    critic_params: Any
+    target_actor_params: Any
+    target_critic_params: Any
+    actor_opt_state: Any
+    critic_opt_state: Any
+    env_state: State  # batch of num_envs worlds (sharded over devices)
+    noise_state: jax.Array  # (num_envs, action_size)
+    replay: replay.ReplayBuffer  # (replay_size, ...) rows (sharded over devices)
+    rng: jax.Array  # replicated PRNG key; devices fold in their index where they must differ
+    iteration: jax.Array  # vectorised env steps taken so far
+    episode_return: jax.Array  # (num_envs,) return of each env's running episode
+
+
+class Learner(NamedTuple):
+    """What one gradient update changes."""
+    actor_params: Any
+    critic_params: Any
+    target_actor_params: Any
+    target_critic_params: Any
+    actor_opt_state: Any
+    critic_opt_state: Any
+
+
+class Trainer(NamedTuple):
+    init: Callable[[jax.Array], TrainState]
+    train_chunk: Callable[[TrainState, Any], tuple[TrainState, dict]]
+    train: Callable | None  # None when sharded over several devices
+    act: Callable[[Any, jax.Array], jax.Array]  # deterministic actor
+    env: Any  # the wrapped, batched env
+    mesh: Mesh | None
+    state_sharding: Any  # TrainState of NamedSharding (None when unsharded)
+    num_devices: int
+
+
+def _learner(ts: TrainState) -> Learner:
+    return Learner(ts.actor_params, ts.critic_params, ts.target_actor_params, ts.target_critic_params,
+                   ts.actor_opt_state, ts.critic_opt_state)
+
+
+def _with_learner(ts: TrainState, lr: Learner) -> TrainState:
+    return ts.replace(**lr._asdict())
+
+
+def resolve_devices(num_devices: int) -> list:
+    devices = jax.devices()
+    if num_devices == 0:
+        return devices
+    if num_devices > len(devices):
+        raise ConfigError(
+            f"config field 'train.num_devices': asks for {num_devices} devices, only {len(devices)} present"
+        )
+    return devices[:num_devices]
+
+
+def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, devices: list | None = None) -> Trainer:
+    """Build DDPG for `env` (one world, the env contract) from a config with `.ddpg` and `.train` sections.
+
+    `human_reward_fn(human_params, obs, action) -> (B,)` adds `beta * r_hat` to the reward at sample time;
+    its parameters are passed to `train_chunk` on every call (None when there is no model).
+    """
+    dc, tc = config.ddpg, config.train
+    devices = resolve_devices(tc.num_devices) if devices is None else devices
+    n_dev = len(devices)
+    for name, value in (("train.num_envs", tc.num_envs), ("ddpg.replay_size", dc.replay_size),
+                        ("ddpg.batch_size", dc.batch_size)):
+        if value % n_dev:
+            raise ConfigError(f"config field '{name}': {value} is not divisible by the {n_dev} devices")
+    local_envs, local_capacity, local_batch = tc.num_envs // n_dev, dc.replay_size // n_dev, dc.batch_size // n_dev
+    if local_capacity < local_envs:
+        raise ConfigError(f"config field 'ddpg.replay_size': {dc.replay_size} holds less than one step of every env")
+    sharded = n_dev > 1
+    axis = AXIS if sharded else None
+
+    venv = wrap_for_training(env, tc.episode_length)
+    obs_size, act_size = env.observation_size, env.action_size
+    num_terms = len(env.reward_term_names)
+    weights = jnp.asarray(env.reward_weights, jnp.float32)
+    actor = Actor(action_size=act_size, hidden=tuple(dc.actor_hidden))
+    critic = Critic(hidden=tuple(dc.critic_hidden))
+    actor_opt = optax.adam(dc.actor_lr)
+    critic_opt = optax.adam(dc.critic_lr)
+    warmup_iterations = tc.warmup_iterations
+
+    def local_key(key):
+        """Per-device randomness (env resets, noise, minibatches); the carried key stays replicated."""
+        return jax.random.fold_in(key, jax.lax.axis_index(axis)) if sharded else key
+
+    def pmean(x):
+        return jax.lax.pmean(x, axis) if sharded else x
+
+    def psum(x):
+        return jax.lax.psum(x, axis) if sharded else x
+
+    def init(rng: jax.Array) -> TrainState:
+        k_actor, k_critic, k_env, k_run = jax.random.split(rng, 4)
+        actor_params = actor.init(k_actor, jnp.zeros((obs_size,)))
+        critic_params = critic.init(k_critic, jnp.zeros((obs_size,)), jnp.zeros((act_size,)))
+        env_state = venv.reset(jax.random.split(local_key(k_env), local_envs))
+        return TrainState(
+            actor_params=actor_params,
+            critic_params=critic_params,
+            target_actor_params=actor_params,
+            target_critic_params=critic_params,
+            actor_opt_state=actor_opt.init(actor_params),
+            critic_opt_state=critic_opt.init(critic_params),
+            env_state=env_state,
+            noise_state=noise.init(dc.noise, (local_envs, act_size)),
+            replay=replay.init(local_capacity, obs_size, act_size, num_terms),
+            rng=k_run,
+            iteration=jnp.zeros((), jnp.int32),
+            episode_return=jnp.zeros((local_envs,)),
+        )
+
+    def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params):
+        """One DDPG update from a fresh minibatch: critic, then actor against the new critic, then targets."""
+        batch = replay.sample(buffer, local_key(key), local_batch)
+        reward = losses.relabel(batch, weights, dc.reward_alpha, dc.reward_beta, human_reward_fn, human_params)
+        next_q = critic.apply(lr.target_critic_params, batch.next_obs,
+                              actor.apply(lr.target_actor_params, batch.next_obs))
+        target_q = losses.td_target(reward, next_q, batch.terminal, dc.gamma)
+        (c_loss, q_mean), c_grads = jax.value_and_grad(losses.critic_loss, has_aux=True)(
+            lr.critic_params, critic.apply, batch, target_q)
+        c_updates, critic_opt_state = critic_opt.update(pmean(c_grads), lr.critic_opt_state, lr.critic_params)
+        critic_params = optax.apply_updates(lr.critic_params, c_updates)
+
+        a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(
+            lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs)
+        a_updates, actor_opt_state = actor_opt.update(pmean(a_grads), lr.actor_opt_state, lr.actor_params)
+        actor_params = optax.apply_updates(lr.actor_params, a_updates)
+
+        new = Learner(
+            actor_params=actor_params,
+            critic_params=critic_params,
+            target_actor_params=losses.soft_update(lr.target_actor_params, actor_params, dc.tau),
+            target_critic_params=losses.soft_update(lr.target_critic_params, critic_params, dc.tau),
+            actor_opt_state=actor_opt_state,
+            critic_opt_state=critic_opt_state,
+        )
+        return new, jnp.stack([c_loss, a_loss, q_mean, jnp.mean(reward)])
+
+    def _updates(lr: Learner, key, buffer, human_params):
+        def body(lr, k):
+            return _update(lr, k, buffer, human_params)
+        lr, stats = jax.lax.scan(body, lr, jax.random.split(key, tc.updates_per_step))
+        return lr, jnp.sum(stats, axis=0), jnp.float32(tc.updates_per_step)
+
+    def _no_updates(lr: Learner, key, buffer, human_params):
+        return lr, jnp.zeros((4,)), jnp.float32(0.0)
+
+    def _env_step(ts: TrainState, k_noise, k_random):
+        """Act on every env (random during warm-up, else actor + noise), step, store the transitions."""
+        obs = ts.env_state.obs
+        noise_state = noise.step(dc.noise, ts.noise_state, local_key(k_noise))
+        explore = jnp.clip(actor.apply(ts.actor_params, obs) + noise_state, -1.0, 1.0)
+        uniform = jax.random.uniform(local_key(k_random), explore.shape, minval=-1.0, maxval=1.0)
+        action = jnp.where(ts.iteration < warmup_iterations, uniform, explore)
+
+        env_state = venv.step(ts.env_state, action)
+        done = env_state.done
+        terminal = done * (1.0 - env_state.info["truncation"])
+        transition = replay.Transition(obs, action, env_state.metrics["reward_terms"],
+                                       env_state.info["final_obs"], terminal)
+        episode_return = ts.episode_return + env_state.reward
+        stats = {
+            "episodes": jnp.sum(done),
+            "return_sum": jnp.sum(episode_return * done),
+            "reward": jnp.sum(env_state.reward),
+            "contact": jnp.sum(env_state.metrics.get("self_contact", jnp.zeros_like(done))),
+            "reward_terms": jnp.sum(env_state.metrics["reward_terms"], axis=0),
+        }
+        ts = ts.replace(
+            env_state=env_state,
+            noise_state=noise.reset_done(dc.noise, noise_state, done),
+            replay=replay.add(ts.replay, transition),
+            episode_return=jnp.where(done > 0, 0.0, episode_return),
+        )
+        return ts, stats
+
+    def _iteration(ts: TrainState, human_params):
+        rng, k_noise, k_random, k_update = jax.random.split(ts.rng, 4)
+        ts, stats = _env_step(ts, k_noise, k_random)
+        if tc.updates_per_step > 0:
+            learn = ts.iteration >= warmup_iterations
+            lr, update_stats, n_updates = jax.lax.cond(
+                learn, _updates, _no_updates, _learner(ts), k_update, ts.replay, human_params)
+            ts = _with_learner(ts, lr)
+        else:
+            update_stats, n_updates = jnp.zeros((4,)), jnp.float32(0.0)
+        stats.update(update_stats=update_stats, updates=n_updates)
+        return ts.replace(rng=rng, iteration=ts.iteration + 1), stats
+
+    def _chunk(ts: TrainState, human_params):
+        ts, stats = jax.lax.scan(lambda t, _: _iteration(t, human_params), ts, None, length=tc.chunk_steps)
+        total = jax.tree.map(lambda x: psum(jnp.sum(x, axis=0)), stats)
+        env_steps = tc.chunk_steps * tc.num_envs
+        updates = jnp.maximum(total["updates"] / (n_dev if sharded else 1), 1.0)
+        u = total["update_stats"] / (n_dev if sharded else 1)
+        has_updates = total["updates"] > 0
+        nan = jnp.float32(jnp.nan)
+        metrics = {
+            "env_steps": ts.iteration * tc.num_envs,
+            "episodes": total["episodes"],
+            "episode_return": jnp.where(total["episodes"] > 0,
+                                        total["return_sum"] / jnp.maximum(total["episodes"], 1), nan),
+            "step_reward": total["reward"] / env_steps,
+            "contact_rate": total["contact"] / env_steps,
+            "reward_terms": total["reward_terms"] / env_steps,
+            "critic_loss": jnp.where(has_updates, u[0] / updates, nan),
+            "actor_loss": jnp.where(has_updates, u[1] / updates, nan),
+            "q_mean": jnp.where(has_updates, u[2] / updates, nan),
+            "sampled_reward": jnp.where(has_updates, u[3] / updates, nan),
+        }
+        return ts, metrics
+
+    def act(actor_params, obs):
+        return actor.apply(actor_params, obs)
+
+    if not sharded:
+        def train(rng, human_params=None):
+            ts = init(rng)
+            return jax.lax.scan(lambda t, _: _chunk(t, human_params), ts, None, length=tc.num_chunks)
+
+        return Trainer(init=jax.jit(init), train_chunk=jax.jit(_chunk, donate_argnums=0), train=train,
+                       act=jax.jit(act), env=venv, mesh=None, state_sharding=None, num_devices=1)
+
+    mesh = Mesh(np.array(devices), (AXIS,))
+    specs = _state_specs()
+    sharded_init = jax.jit(jax.shard_map(init, mesh=mesh, in_specs=P(), out_specs=specs, check_vma=False))
+    sharded_chunk = jax.jit(
+        jax.shard_map(_chunk, mesh=mesh, in_specs=(specs, P()), out_specs=(specs, P()), check_vma=False),
+        donate_argnums=0,
+    )
+    abstract = jax.eval_shape(sharded_init, jax.random.PRNGKey(0))
+    state_sharding = jax.tree.map(
+        lambda spec, sub: jax.tree.map(lambda _: NamedSharding(mesh, spec), sub),
+        specs, abstract, is_leaf=lambda x: isinstance(x, P))
+    return Trainer(init=sharded_init, train_chunk=sharded_chunk, train=None, act=jax.jit(act), env=venv,
+                   mesh=mesh, state_sharding=state_sharding, num_devices=n_dev)
+
+
+def _state_specs() -> TrainState:
+    """Partition specs as a prefix of TrainState: per-env and per-row arrays split, the rest replicated."""
+    split = P(AXIS)
+    return TrainState(
+        actor_params=P(), critic_params=P(), target_actor_params=P(), target_critic_params=P(),
+        actor_opt_state=P(), critic_opt_state=P(),
+        env_state=split, noise_state=split,
+        replay=replay.ReplayBuffer(data=split, ptr=P(), size=P()),
+        rng=P(), iteration=P(), episode_return=split,
+    )
