@@ -15,6 +15,8 @@ from mjx_protamer.config import ConfigError
 # Each module registers one or more subcommands; the order is the order shown in --help.
 COMMAND_MODULES = (
     "mjx_protamer.commands.bench",
+    "mjx_protamer.commands.voice",
+    "mjx_protamer.commands.train",
 )
 
 

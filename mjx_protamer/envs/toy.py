@@ -27,11 +27,12 @@ from mjx_protamer.envs.base import State
 class ToyEnvConfig:
     max_step: float = 0.15
     reach_radius: float = 0.1
-    reward_weights: tuple[float, float, float] = (1.0, 0.05, 0.5)
+    reward_weights: tuple[float, ...] = (1.0, 0.05, 0.5)  # distance, effort, reach
 
     def validate(self) -> None:
         check(self.max_step > 0, "max_step", f"must be > 0, got {self.max_step}")
         check(self.reach_radius > 0, "reach_radius", f"must be > 0, got {self.reach_radius}")
+        check(len(self.reward_weights) == 3, "reward_weights", f"needs 3 weights, got {self.reward_weights}")
 
 
 class PointReachEnv:

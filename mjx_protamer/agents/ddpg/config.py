@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from mjx_protamer.config import check
+from mjx_protamer.envs.toy import ToyEnvConfig
 
 
 @dataclass(frozen=True)
@@ -97,3 +98,17 @@ class TrainConfig:
     @property
     def warmup_iterations(self) -> int:
         return -(-self.warmup_env_steps // self.num_envs)
+
+
+@dataclass(frozen=True)
+class PretrainConfig:
+    """A whole `protamer pretrain` run: which env (with its config), the learner, the run settings."""
+
+    env_name: Literal["self_touch", "toy"] = "self_touch"
+    toy: ToyEnvConfig = field(default_factory=ToyEnvConfig)
+    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def validate(self) -> None:
+        check(self.train.warmup_env_steps < self.train.iterations * self.train.num_envs, "train.warmup_env_steps",
+              "is longer than the whole run, so nothing would be learned")

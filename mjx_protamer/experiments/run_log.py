@@ -1,0 +1,97 @@
+"""Per-chunk training logs: a CSV, TensorBoard event files (tensorboardX) and a training-curve plot."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+CSV_NAME = "metrics.csv"
+PLOT_NAME = "training_curve.png"
+
+
+def flatten(metrics: dict, term_names: tuple[str, ...]) -> dict[str, float]:
+    """Host scalars from a chunk's metrics; the reward-term vector becomes one column per term."""
+    row: dict[str, float] = {}
+    for key, value in metrics.items():
+        value = np.asarray(value)
+        if key == "reward_terms":
+            for name, v in zip(term_names, value.reshape(-1)):
+                row[f"reward_term/{name}"] = float(v)
+        else:
+            row[key] = float(value)
+    return row
+
+
+class RunLog:
+    """Appends one row per chunk. On resume, rows past the restored chunk (written after the last
+    checkpoint of a killed run) are dropped so the log matches an uninterrupted run."""
+
+    def __init__(self, out_dir: str | Path, resume_chunk: int = 0, tensorboard: bool = True):
+        self.out_dir = Path(out_dir)
+        self.csv_path = self.out_dir / CSV_NAME
+        self.rows: list[dict] = []
+        if resume_chunk > 0 and self.csv_path.exists():
+            with self.csv_path.open() as f:
+                self.rows = [
+                    {k: float(v) for k, v in r.items()} for r in csv.DictReader(f) if float(r["chunk"]) <= resume_chunk
+                ]
+        self._rewrite()
+        self.writer = None
+        if tensorboard:
+            from tensorboardX import SummaryWriter
+
+            purge = int(self.rows[-1]["env_steps"]) + 1 if self.rows else None
+            self.writer = SummaryWriter(str(self.out_dir / "tb"), purge_step=purge)
+
+    def _rewrite(self) -> None:
+        if not self.rows:
+            self.csv_path.write_text("")
+            return
+        with self.csv_path.open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(self.rows[0]))
+            w.writeheader()
+            w.writerows(self.rows)
+
+    def write(self, row: dict[str, float]) -> None:
+        new_file = not self.rows
+        self.rows.append(row)
+        with self.csv_path.open("a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(self.rows[0]))
+            if new_file:
+                w.writeheader()
+            w.writerow(row)
+        if self.writer is not None:
+            step = int(row["env_steps"])
+            for key, value in row.items():
+                if key not in ("chunk", "env_steps") and not math.isnan(value):
+                    self.writer.add_scalar(key if "/" in key else f"train/{key}", value, step)
+            self.writer.flush()
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+
+
+def plot_curve(rows: list[dict], path: str | Path) -> Path:
+    """Episode return and contact rate against env steps, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [r["env_steps"] for r in rows]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
+    axes[0].plot(steps, [r["episode_return"] for r in rows], marker=".")
+    axes[0].set_ylabel("episode return")
+    axes[1].plot(steps, [r["contact_rate"] for r in rows], marker=".", color="tab:orange")
+    axes[1].set_ylabel("self-contact rate")
+    for ax in axes:
+        ax.set_xlabel("env steps")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
