@@ -16,7 +16,6 @@ from mjx_protamer.config import ConfigError
 COMMAND_MODULES = (
     "mjx_protamer.commands.bench",
     "mjx_protamer.commands.voice",
-    "mjx_protamer.commands.voice",
     "mjx_protamer.commands.train",
 )
 
