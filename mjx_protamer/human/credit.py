@@ -18,6 +18,7 @@ event is reported with its reason. The weights are the `w` of the weighted squar
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Literal
 
 import numpy as np
@@ -132,3 +133,16 @@ class StepHistory:
         w = np.asarray(credit.weights, np.float32)[ok]
         h = np.full(len(idx), credit.event.value, np.float32)
         return self.obs[idx], self.action[idx], w, h
+
+
+def lag_weights(config: CreditConfig, dt: float) -> np.ndarray:
+    """Weights by lag j (step k - j) for feedback arriving while step k is shown, on a regular clock with
+    period dt: what `CreditAssigner` gives when the event time is the start of step k. Used by the
+    in-jit credit (`human.batched`), which knows arrival steps but no wall-clock times."""
+    if config.scheme == "step_window":
+        return step_window_weights(config.window_steps, config.decay).astype(np.float32)
+    n = int(math.ceil(config.delay_max_s / dt)) + 1
+    j = np.arange(n)
+    w = [time_window_weight(-jj * dt, -(jj - 1) * dt, 0.0, config.delay_min_s, config.delay_max_s) for jj in j]
+    w = np.asarray(w, np.float32)
+    return w[: int(np.flatnonzero(w)[-1]) + 1]

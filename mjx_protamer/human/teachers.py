@@ -1,0 +1,339 @@
+"""Simulated teachers: a hidden scoring rule, a giving model and a channel model, in one JAX core.
+
+There is no human in CI; a simulated teacher stands in for one, reproducibly (seeded).
+
+Scoring rule (hidden from the learner)
+    A list of clauses over named per-step signals. A signal is a reward term of the env (by name, e.g.
+    "region", "contact", "movement", "joint_limit"), a per-step metric (e.g. "self_contact", "arm_speed"),
+    or "obs:i" / "action:i". A clause fires when its signal is above `above` and below `below` for
+    `sustain` consecutive steps; the step's score is the clipped sum of the fired clauses' values.
+    The default rule (self-touch): approve a new region (+1) and sustained contact (+0.6 after 0.1 s),
+    disapprove freezing or flailing (movement penalty for 0.2 s, -1) and pushing joint limits (-0.7).
+
+Giving model
+    A step whose |score| >= threshold is eligible; the teacher gives with probability `give_rate`, never
+    within `min_gap_steps` of its last feedback, and not while silent (a two-state Markov chain with
+    long-run silent fraction `silence_fraction` and mean silent period `silence_mean_s`). With
+    probability `flip_prob` it gives the opposite sign (a mistake). Each given feedback has a reaction
+    delay ~ max(delay_min_s, Normal(delay_mean_s, delay_std_s)) from the step it is about.
+
+Channels (per modality)
+    keyboard: exact +-1, fast (0.35 +- 0.1 s reaction, no processing latency);
+    prosody: continuous, noisy: tanh(gain * score + Normal(0, noise_std)) (0.6 s reaction, 0.8 s
+        utterance, 0.3 s model latency);
+    speech: +1 / 0 / -1 through a confusion matrix (rows intended +1/0/-1, columns recognised), longer
+        latency (0.8 s reaction, 1.0 s utterance, 1.2 s transcription).
+
+Two variants share `teacher_step`:
+- `batched_teacher`: jitted `lax.scan` over a chunk of steps for a batch of envs, one teacher per env;
+  a pending ring of length `max_delay_steps` delivers each feedback `delay` steps later, so the output
+  is (value, valid) per step and env as a learner inside jit would receive it.
+- `HostTeacher`: watches one env; after each chunk it scores the chunk's steps with the same core and
+  schedules `FeedbackEvent`s at step time + delay (+ utterance and processing latency for arrival), then
+  `emit_due(queue, now)` puts them into the real `FeedbackQueue`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+import math
+from typing import Literal, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjx_protamer.config import check
+from mjx_protamer.human.events import FeedbackEvent
+
+
+@dataclasses.dataclass(frozen=True)
+class Clause:
+    signal: str
+    value: float
+    above: float | None = None
+    below: float | None = None
+    sustain: int = 1  # consecutive steps the condition must hold
+
+    def validate(self) -> None:
+        check(self.above is not None or self.below is not None, "above",
+              f"clause on '{self.signal}' needs 'above' or 'below'")
+        check(self.sustain >= 1, "sustain", f"must be >= 1, got {self.sustain}")
+        check(-1.0 <= self.value <= 1.0, "value", f"must be in [-1, 1], got {self.value}")
+
+
+SELF_TOUCH_RULE = (
+    Clause("region", 1.0, above=0.0),
+    Clause("contact", 0.6, above=0.05, sustain=20),
+    Clause("movement", -1.0, below=-0.25, sustain=40),
+    Clause("joint_limit", -0.7, below=-0.05),
+)
+
+_PRESETS = {
+    # reaction delay mean/std/min (s), utterance duration (s), processing latency (s)
+    "keyboard": dict(delay_mean_s=0.35, delay_std_s=0.1, delay_min_s=0.15, duration_s=0.0, latency_s=0.0),
+    "prosody": dict(delay_mean_s=0.6, delay_std_s=0.2, delay_min_s=0.25, duration_s=0.8, latency_s=0.3),
+    "speech": dict(delay_mean_s=0.8, delay_std_s=0.25, delay_min_s=0.3, duration_s=1.0, latency_s=1.2),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class ChannelConfig:
+    kind: Literal["keyboard", "prosody", "speech"] = "keyboard"
+    delay_mean_s: float | None = None  # None: the kind's preset
+    delay_std_s: float | None = None
+    delay_min_s: float | None = None
+    duration_s: float | None = None  # key press 0; an utterance's length (t_end - t_start)
+    latency_s: float | None = None  # processing after t_end before the event reaches the queue
+    gain: float = 2.0  # prosody: value = tanh(gain * score + noise)
+    noise_std: float = 0.5  # prosody
+    # speech: P(recognised | intended), rows intended (+1, 0, -1), columns recognised (+1, 0, -1)
+    confusion: tuple[float, ...] = (0.85, 0.10, 0.05, 0.10, 0.80, 0.10, 0.05, 0.10, 0.85)
+
+    def validate(self) -> None:
+        check(len(self.confusion) == 9, "confusion", f"needs 9 entries (3x3), got {len(self.confusion)}")
+        for r in range(3):
+            row = self.confusion[3 * r:3 * r + 3]
+            check(min(row) >= 0 and abs(sum(row) - 1.0) < 1e-6, "confusion", f"row {r} must be a distribution, got {row}")
+        check(self.noise_std >= 0, "noise_std", f"must be >= 0, got {self.noise_std}")
+        for name in ("delay_mean_s", "delay_std_s", "delay_min_s", "duration_s", "latency_s"):
+            v = getattr(self, name)
+            check(v is None or v >= 0, name, f"must be >= 0, got {v}")
+
+    def get(self, name: str) -> float:
+        v = getattr(self, name)
+        return float(_PRESETS[self.kind][name] if v is None else v)
+
+
+@dataclasses.dataclass(frozen=True)
+class TeacherConfig:
+    rule: tuple[Clause, ...] = SELF_TOUCH_RULE
+    threshold: float = 0.5  # |score| needed to consider giving feedback
+    give_rate: float = 0.5
+    min_gap_steps: int = 40
+    flip_prob: float = 0.05
+    silence_fraction: float = 0.1
+    silence_mean_s: float = 2.0
+    channel: ChannelConfig = dataclasses.field(default_factory=ChannelConfig)
+
+    def validate(self) -> None:
+        check(len(self.rule) >= 1, "rule", "needs at least one clause")
+        check(0.0 <= self.give_rate <= 1.0, "give_rate", f"must be in [0, 1], got {self.give_rate}")
+        check(0.0 <= self.flip_prob <= 1.0, "flip_prob", f"must be in [0, 1], got {self.flip_prob}")
+        check(0.0 <= self.silence_fraction < 1.0, "silence_fraction", f"must be in [0, 1), got {self.silence_fraction}")
+        check(self.silence_mean_s > 0, "silence_mean_s", f"must be > 0, got {self.silence_mean_s}")
+        check(self.min_gap_steps >= 0, "min_gap_steps", f"must be >= 0, got {self.min_gap_steps}")
+        check(self.threshold >= 0, "threshold", f"must be >= 0, got {self.threshold}")
+
+    @property
+    def signals(self) -> tuple[str, ...]:
+        """The signal each clause reads, in clause order (the columns `teacher_step` expects)."""
+        return tuple(c.signal for c in self.rule)
+
+
+def with_channel(config: TeacherConfig, kind: str) -> TeacherConfig:
+    return dataclasses.replace(config, channel=dataclasses.replace(config.channel, kind=kind))
+
+
+class TeacherState(NamedTuple):
+    runs: jax.Array  # (C,) int32: consecutive steps each clause's condition has held
+    since_give: jax.Array  # int32: steps since the last feedback given
+    silent: jax.Array  # bool
+
+
+class Decision(NamedTuple):
+    give: jax.Array  # bool
+    value: jax.Array  # float in [-1, 1]
+    score: jax.Array  # the hidden score of the step
+    delay_s: jax.Array  # reaction delay (s)
+
+
+def teacher_init(config: TeacherConfig) -> TeacherState:
+    return TeacherState(runs=jnp.zeros((len(config.rule),), jnp.int32),
+                        since_give=jnp.full((), 1 << 20, jnp.int32), silent=jnp.zeros((), bool))
+
+
+def teacher_step(config: TeacherConfig, dt: float, state: TeacherState, signals: jax.Array,
+                 key: jax.Array) -> tuple[TeacherState, Decision]:
+    """One step of one teacher: `signals` (C,) in `config.signals` order."""
+    rule, ch = config.rule, config.channel
+    above = jnp.asarray([-jnp.inf if c.above is None else c.above for c in rule])
+    below = jnp.asarray([jnp.inf if c.below is None else c.below for c in rule])
+    values = jnp.asarray([c.value for c in rule])
+    sustain = jnp.asarray([c.sustain for c in rule])
+    cond = (signals > above) & (signals < below)
+    runs = jnp.where(cond, state.runs + 1, 0)
+    score = jnp.clip(jnp.sum(jnp.where(runs >= sustain, values, 0.0)), -1.0, 1.0)
+
+    k_silence, k_give, k_flip, k_noise, k_delay = jax.random.split(key, 5)
+    p_leave = min(1.0, dt / config.silence_mean_s)
+    p_enter = p_leave * config.silence_fraction / (1.0 - config.silence_fraction)
+    u = jax.random.uniform(k_silence)
+    silent = jnp.where(state.silent, u >= p_leave, u < p_enter)
+    eligible = (jnp.abs(score) >= max(config.threshold, 1e-6)) & (state.since_give >= config.min_gap_steps) & ~silent
+    give = eligible & (jax.random.uniform(k_give) < config.give_rate)
+
+    intended = jnp.sign(score) * jnp.where(jax.random.uniform(k_flip) < config.flip_prob, -1.0, 1.0)
+    if ch.kind == "keyboard":
+        value = intended
+    elif ch.kind == "prosody":
+        value = jnp.tanh(ch.gain * intended * jnp.abs(score) + ch.noise_std * jax.random.normal(k_noise))
+    else:  # speech: intended +1 -> row 0, 0 -> row 1, -1 -> row 2; recognised column c -> value 1 - c
+        confusion = jnp.asarray(ch.confusion, jnp.float32).reshape(3, 3)
+        row = (1 - intended).astype(jnp.int32)
+        value = 1.0 - jax.random.categorical(k_noise, jnp.log(confusion[row] + 1e-12)).astype(jnp.float32)
+    delay = jnp.maximum(ch.get("delay_min_s"),
+                        ch.get("delay_mean_s") + ch.get("delay_std_s") * jax.random.normal(k_delay))
+    since = jnp.where(give, 0, state.since_give + 1)
+    return TeacherState(runs, since, silent), Decision(give, value.astype(jnp.float32), score, delay)
+
+
+def _scan_decisions(config: TeacherConfig, dt: float, state: TeacherState, signals: jax.Array, key: jax.Array):
+    """Decisions of one teacher over (T, C) signals."""
+    def body(s, xs):
+        sig, k = xs
+        return teacher_step(config, dt, s, sig, k)
+    return jax.lax.scan(body, state, (signals, jax.random.split(key, signals.shape[0])))
+
+
+# ------------------------------------------------------------------------------------------------
+# Batched, inside jit: one teacher per env, delays realised with a pending ring.
+
+class BatchedTeacherState(NamedTuple):
+    teacher: TeacherState  # batched over envs
+    pending_value: jax.Array  # (B, D)
+    pending_valid: jax.Array  # (B, D) bool
+    pending_about: jax.Array  # (B, D) int32: the step (global) the pending feedback is about
+    step: jax.Array  # int32 global step counter (same for all envs)
+
+
+def max_delay_steps(config: TeacherConfig, dt: float) -> int:
+    ch = config.channel
+    worst = ch.get("delay_mean_s") + 4 * ch.get("delay_std_s") + ch.get("duration_s") + ch.get("latency_s")
+    return int(math.ceil(worst / dt)) + 1
+
+
+def batched_teacher_init(config: TeacherConfig, num_envs: int, dt: float) -> BatchedTeacherState:
+    d = max_delay_steps(config, dt)
+    t = teacher_init(config)
+    return BatchedTeacherState(
+        teacher=jax.tree.map(lambda x: jnp.broadcast_to(x, (num_envs, *x.shape)), t),
+        pending_value=jnp.zeros((num_envs, d)), pending_valid=jnp.zeros((num_envs, d), bool),
+        pending_about=jnp.zeros((num_envs, d), jnp.int32), step=jnp.zeros((), jnp.int32))
+
+
+def batched_teacher(config: TeacherConfig, dt: float, state: BatchedTeacherState, signals: jax.Array,
+                    key: jax.Array, arrival: bool = True):
+    """Run a chunk: signals (T, B, C) -> (state, out) with out["value"], out["valid"], out["about"] (T, B).
+
+    With `arrival` (default), feedback is delivered at the step it would reach the learner: the step it
+    is about + (reaction delay + utterance + latency) / dt; `about` says which step it judged (for
+    diagnostics: a learner must not read it). Without, it is returned at the judged step itself.
+    Pure and jittable (config and dt static).
+    """
+    ch = config.channel
+    extra = ch.get("duration_s") + ch.get("latency_s")
+    d = state.pending_value.shape[1]
+    b = signals.shape[1]
+
+    def body(s: BatchedTeacherState, xs):
+        sig, k = xs
+        keys = jax.random.split(k, b)
+        teacher, dec = jax.vmap(lambda ts, x, kk: teacher_step(config, dt, ts, x, kk))(s.teacher, sig, keys)
+        if not arrival:
+            out = {"value": jnp.where(dec.give, dec.value, 0.0), "valid": dec.give,
+                   "about": jnp.broadcast_to(s.step, (b,)), "score": dec.score}
+            return s._replace(teacher=teacher, step=s.step + 1), out
+        lag = jnp.clip(jnp.round((dec.delay_s + extra) / dt).astype(jnp.int32), 1, d - 1)
+        slot = (s.step + lag) % d
+        rows = jnp.arange(b)
+        write = dec.give & ~s.pending_valid[rows, slot]  # a slot already taken keeps its feedback
+        pv = s.pending_value.at[rows, slot].set(jnp.where(write, dec.value, s.pending_value[rows, slot]))
+        pm = s.pending_valid.at[rows, slot].set(write | s.pending_valid[rows, slot])
+        pa = s.pending_about.at[rows, slot].set(jnp.where(write, s.step, s.pending_about[rows, slot]))
+        now = s.step % d
+        out = {"value": jnp.where(pm[:, now], pv[:, now], 0.0), "valid": pm[:, now], "about": pa[:, now],
+               "score": dec.score}
+        pm = pm.at[:, now].set(False)
+        return BatchedTeacherState(teacher, pv, pm, pa, s.step + 1), out
+
+    keys = jax.random.split(key, signals.shape[0])
+    return jax.lax.scan(body, state, (signals, keys))
+
+
+# ------------------------------------------------------------------------------------------------
+# Host variant: watches one env, feeds the real queue.
+
+def signal_matrix(names: tuple[str, ...], term_names: tuple[str, ...], reward_terms=None, metrics=None,
+                  obs=None, action=None) -> np.ndarray:
+    """(T, C) signals for a rule from a chunk's per-step arrays: reward terms by name, metrics by key,
+    "obs:i" and "action:i"."""
+    cols = []
+    for name in names:
+        if name.startswith("obs:"):
+            cols.append(np.asarray(obs)[:, int(name[4:])])
+        elif name.startswith("action:"):
+            cols.append(np.asarray(action)[:, int(name[7:])])
+        elif name in term_names and reward_terms is not None:
+            cols.append(np.asarray(reward_terms)[:, term_names.index(name)])
+        elif metrics is not None and name in metrics:
+            cols.append(np.asarray(metrics[name]).reshape(len(np.asarray(metrics[name])), -1)[:, 0])
+        else:
+            raise KeyError(f"teacher signal {name!r} is not a reward term ({', '.join(term_names)}), "
+                           f"a metric ({', '.join(sorted(metrics or {}))}), obs:i or action:i")
+    return np.stack(cols, axis=1).astype(np.float32)
+
+
+class HostTeacher:
+    """A simulated teacher for one env that puts timed events into a FeedbackQueue.
+
+    `observe(first_step, step_times, signals)` after each chunk; `emit_due(queue, now)` before draining.
+    The events say what they are about in `details` (step, score, channel, intended and recognised
+    value) for analysis; the learner uses only the timestamps and values.
+    """
+
+    def __init__(self, config: TeacherConfig, dt: float, seed: int = 0):
+        self.config = config
+        self.dt = dt
+        self.state = teacher_init(config)
+        self.key = jax.random.PRNGKey(seed)
+        self._scan = jax.jit(lambda s, x, k: _scan_decisions(config, dt, s, x, k))
+        self._pending: list[tuple[float, int, FeedbackEvent]] = []
+        self._n = 0
+        self.given = 0
+        self.emitted = 0
+        self.refused = 0
+
+    def observe(self, first_step: int, step_times, signals) -> int:
+        """Score a chunk's steps; schedule the feedback given. Returns how many were scheduled."""
+        self.key, k = jax.random.split(self.key)
+        self.state, dec = self._scan(self.state, jnp.asarray(signals, jnp.float32), k)
+        give, value, score, delay = (np.asarray(x) for x in dec)
+        ch = self.config.channel
+        duration, latency = ch.get("duration_s"), ch.get("latency_s")
+        for i in np.flatnonzero(give):
+            t0 = float(step_times[i]) + float(delay[i])
+            event = FeedbackEvent(t0, t0 + duration, "simulated", float(value[i]),
+                                  {"channel": ch.kind, "about_step": int(first_step + i),
+                                   "score": float(score[i]), "latency": latency})
+            heapq.heappush(self._pending, (t0 + duration + latency, self._n, event))
+            self._n += 1
+        self.given += int(give.sum())
+        return int(give.sum())
+
+    def emit_due(self, queue, now: float) -> int:
+        """Put every scheduled event whose arrival time has come into the queue."""
+        n = 0
+        while self._pending and self._pending[0][0] <= now:
+            _, _, event = heapq.heappop(self._pending)
+            if queue.put(event):
+                n += 1
+            else:
+                self.refused += 1
+        self.emitted += n
+        return n
+
+    @property
+    def pending(self) -> int:
+        return len(self._pending)

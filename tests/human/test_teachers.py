@@ -1,0 +1,115 @@
+"""Simulated teachers: scoring rule, giving model, channels; batched (jit) and host (real queue) variants."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mjx_protamer.config import ConfigError, from_dict
+from mjx_protamer.human.clock import VirtualClock
+from mjx_protamer.human.queue import FeedbackQueue
+from mjx_protamer.human.teachers import (ChannelConfig, Clause, HostTeacher, TeacherConfig,
+                                         batched_teacher, batched_teacher_init, signal_matrix, with_channel)
+
+DT = 0.01
+RULE = (Clause("region", 1.0, above=0.0), Clause("movement", -1.0, below=-0.25, sustain=5))
+EXACT = TeacherConfig(rule=RULE, threshold=0.5, give_rate=1.0, min_gap_steps=0, flip_prob=0.0,
+                      silence_fraction=0.0, channel=ChannelConfig("keyboard", delay_std_s=0.0))
+
+
+def run(config, signals, seed=0, arrival=True):
+    state = batched_teacher_init(config, signals.shape[1], DT)
+    _, out = jax.jit(lambda s, x, k: batched_teacher(config, DT, s, x, k, arrival=arrival))(
+        state, jnp.asarray(signals), jax.random.PRNGKey(seed))
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
+def test_rule_scores_new_regions_and_sustained_freezing():
+    sig = np.zeros((40, 2, 2), np.float32)
+    sig[3, 0, 0] = 0.3  # env 0: a new region at step 3
+    sig[10:20, 1, 1] = -0.5  # env 1: frozen for 10 steps: the clause fires from the 5th (step 14)
+    out = run(EXACT, sig, arrival=False)
+    assert np.flatnonzero(out["valid"][:, 0]).tolist() == [3] and out["value"][3, 0] == 1.0
+    assert np.flatnonzero(out["valid"][:, 1]).tolist() == list(range(14, 20))
+    assert (out["value"][14:20, 1] == -1.0).all()
+
+
+def test_keyboard_feedback_arrives_after_the_reaction_delay():
+    sig = np.zeros((80, 3, 2), np.float32)
+    sig[[5, 30], :, 0] = 1.0
+    out = run(EXACT, sig)
+    for b in range(3):  # delay exactly 0.35 s = 35 steps, no utterance, no latency
+        assert np.flatnonzero(out["valid"][:, b]).tolist() == [40, 65]
+        assert out["about"][40, b] == 5 and out["about"][65, b] == 30
+
+
+def test_give_rate_min_gap_flips_and_silence():
+    sig = np.zeros((2000, 4, 2), np.float32)
+    sig[:, :, 0] = 1.0  # approval-worthy at every step
+    cfg = dataclasses.replace(EXACT, give_rate=0.5, min_gap_steps=10, flip_prob=0.2)
+    out = run(cfg, sig, arrival=False)
+    for b in range(4):
+        given = np.flatnonzero(out["valid"][:, b])
+        assert np.diff(given).min() >= 10
+    # gaps are 10 + Geometric(0.5) - 1 -> mean 11 steps
+    assert 2000 / 11 * 0.85 < out["valid"].sum() / 4 < 2000 / 11 * 1.15
+    assert abs((out["value"][out["valid"]] < 0).mean() - 0.2) < 0.05
+    silent = run(dataclasses.replace(cfg, silence_fraction=0.5, silence_mean_s=0.2), sig, arrival=False)
+    assert 0.35 < silent["valid"].sum() / out["valid"].sum() < 0.65
+
+
+def test_speech_confusion_and_prosody_noise():
+    sig = np.zeros((3000, 4, 2), np.float32)
+    sig[:, :, 0] = 1.0
+    speech = run(with_channel(dataclasses.replace(EXACT, min_gap_steps=0), "speech"), sig, arrival=False)
+    v = speech["value"][speech["valid"]]
+    assert abs((v == 1).mean() - 0.85) < 0.03 and abs((v == 0).mean() - 0.10) < 0.03
+    assert abs((v == -1).mean() - 0.05) < 0.02
+    prosody = run(with_channel(EXACT, "prosody"), sig, arrival=False)
+    v = prosody["value"][prosody["valid"]]
+    assert len(np.unique(v)) > 100 and 0.7 < v.mean() < 0.98 and (np.abs(v) <= 1).all() and (v < 0).any()
+
+
+def test_speech_arrives_later_than_keyboard():
+    sig = np.zeros((400, 2, 2), np.float32)
+    sig[10, :, 0] = 1.0
+    speech = run(with_channel(EXACT, "speech"), sig)
+    (t,) = np.flatnonzero(speech["valid"][:, 0])
+    assert t == 10 + round((0.8 + 1.0 + 1.2) / DT)
+
+
+def test_host_teacher_feeds_the_real_queue_on_a_virtual_clock():
+    clock = VirtualClock(start=1000.0)
+    q = FeedbackQueue(maxsize=16, clock=clock)
+    teacher = HostTeacher(EXACT, DT, seed=0)
+    sig = np.zeros((50, 2), np.float32)
+    sig[[4, 20], 0] = 1.0
+    times = 1000.0 + DT * np.arange(50)
+    assert teacher.observe(0, times, sig) == 2
+    clock.set(times[-1] + DT)
+    assert teacher.emit_due(q, clock()) == 1  # step 4 + 0.35 s is due, step 20 + 0.35 s is not yet
+    clock.advance(0.2)
+    assert teacher.emit_due(q, clock()) == 1
+    events = q.drain()
+    assert [e.details["about_step"] for e in events] == [4, 20]
+    assert [e.t_start for e in events] == pytest.approx([1000.04 + 0.35, 1000.2 + 0.35])
+    assert all(e.value == 1.0 and e.source == "simulated" for e in events)
+
+
+def test_signal_matrix_reads_terms_metrics_obs_and_actions():
+    terms = np.array([[1.0, 2.0], [3.0, 4.0]])
+    m = signal_matrix(("b", "speed", "obs:1", "action:0"), ("a", "b"), terms, {"speed": np.array([5.0, 6.0])},
+                      obs=np.array([[0, 7.0], [0, 8.0]]), action=np.array([[9.0], [10.0]]))
+    np.testing.assert_array_equal(m, [[2, 5, 7, 9], [4, 6, 8, 10]])
+    with pytest.raises(KeyError, match="nope"):
+        signal_matrix(("nope",), ("a",), terms)
+
+
+def test_teacher_config_from_yaml_dict():
+    cfg = from_dict(TeacherConfig, {"rule": [{"signal": "region", "value": 1.0, "above": 0.0}],
+                                    "channel": {"kind": "speech"}})
+    assert cfg.rule[0] == Clause("region", 1.0, above=0.0) and cfg.channel.get("latency_s") == 1.2
+    with pytest.raises(ConfigError, match="confusion"):
+        from_dict(TeacherConfig, {"channel": {"confusion": [1, 0, 0, 0, 1, 0, 0, 0, 0.5]}})
