@@ -50,7 +50,7 @@ class VadConfig:
     window_s: float = 2.0
     min_segment_s: float = 0.4          # shorter segments are padded with the following audio or dropped
     max_segment_s: float = 3.5          # longer utterances are cut here and scored
-    webrtc_aggressiveness: int = 2      # 0..3, webrtcvad only
+    webrtc_aggressiveness: int = 3      # 0..3, webrtcvad only
     webrtc_speech_fraction: float = 0.5  # fraction of 30 ms frames voiced for a chunk to count as speech
 
     def validate(self) -> None:
