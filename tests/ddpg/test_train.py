@@ -1,0 +1,119 @@
+"""The assembled learner on the toy env: it learns, resumes exactly, relabels with a human model, vmaps."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjx_protamer.agents.ddpg.train import make_train
+from mjx_protamer.envs.toy import PointReachEnv
+from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
+from mjx_protamer.experiments.pretrain import run_pretrain
+
+from ddpg_helpers import tiny_config
+
+
+def test_ddpg_solves_point_reach(learned_run):
+    """Threshold: a mean test return above -5 over 10 episodes of 25 steps. The untrained actor (actions ~0)
+    and a uniform random policy both score about -26 (they stay ~1 away from the goal); a policy that
+    heads for the goal reaches it in ~7 steps and collects the reach bonus."""
+    config, out, result = learned_run
+    assert result["finished"]
+    trained = result["eval"]
+    env = PointReachEnv(config.toy)
+    untrained = jax.jit(make_train(config, env).init)(jax.random.PRNGKey(123)).actor_params
+    baseline = evaluate(config, env, untrained, 10, eval_seed(config))
+    random_return = _random_policy_return(env, episodes=10, length=config.train.episode_length)
+    assert baseline["episode_return"] < -15 and random_return < -15
+    assert trained["episode_return"] > -5, trained
+    assert trained["contact_rate"] > 0.4  # "contact" = inside the goal radius
+    assert trained["first_touch_step"] < 15
+
+
+def _random_policy_return(env, episodes, length):
+    def episode(key):
+        k_reset, k_act = jax.random.split(key)
+        state = env.reset(k_reset)
+        actions = jax.random.uniform(k_act, (length, env.action_size), minval=-1, maxval=1)
+        def step(s, a):
+            s = env.step(s, a)
+            return s, s.reward
+        return jnp.sum(jax.lax.scan(step, state, actions)[1])
+    return float(jnp.mean(jax.vmap(episode)(jax.random.split(jax.random.PRNGKey(7), episodes))))
+
+
+def test_outputs_written(learned_run):
+    config, out, result = learned_run
+    for name in ("config.yaml", "metrics.csv", "training_curve.png", "eval.json"):
+        assert (out / name).is_file(), name
+    assert any((out / "tb").iterdir())
+    lines = (out / "metrics.csv").read_text().strip().splitlines()
+    assert len(lines) == 1 + config.train.num_chunks
+    assert "reward_term/distance" in lines[0]
+
+
+def test_resume_is_exact(learned_run, tmp_path):
+    """Kill after 2 of 6 chunks (checkpoint every chunk), resume: same params as the uninterrupted run."""
+    config, _, full = learned_run
+    first = run_pretrain(config, tmp_path, progress=False, max_chunks=2, final_eval=False)
+    assert not first["finished"] and first["chunks_done"] == 2
+    resumed = run_pretrain(config, tmp_path, resume=True, progress=False, final_eval=False)
+    assert resumed["finished"]
+    leaves_full = jax.tree.leaves(full["state"])
+    leaves_resumed = jax.tree.leaves(resumed["state"])
+    assert len(leaves_full) == len(leaves_resumed)
+    for a, b in zip(leaves_full, leaves_resumed):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    rows = (tmp_path / "metrics.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + config.train.num_chunks
+
+
+def test_eval_command_reproduces_final_metrics(learned_run, capsys):
+    from mjx_protamer.cli import build_parser  # noqa: F401  (the CLI imports every command module)
+
+    import argparse
+
+    from mjx_protamer.commands import train as train_cmd
+
+    config, out, result = learned_run
+    parser = argparse.ArgumentParser()
+    train_cmd.register(parser.add_subparsers())
+    args = parser.parse_args(["eval", "--checkpoint", str(out), "--json"])
+    assert args.handler(args) == 0
+    printed = json.loads(capsys.readouterr().out)
+    for key in ("first_touch_step", "contact_rate", "unique_regions", "freeze_ratio"):
+        assert printed[key] == result["eval"][key]
+        assert len(printed["per_episode"][key]) == 10
+    _, _, state, step = load_run(out / "checkpoints")
+    assert step == config.train.num_chunks
+
+
+def test_human_params_relabel_without_recompiling():
+    """Only the last iteration of the chunk updates, so replay and minibatches are the same in both calls:
+    the sampled reward differs by exactly beta * bias. A new value of the params does not recompile."""
+    config = tiny_config(total_env_steps=200, warmup_env_steps=196)  # 50 iterations x 4 envs, 49 warm-up
+    human = lambda params, obs, action: params["bias"] * jnp.ones(obs.shape[0])
+    trainer = make_train(config, PointReachEnv(), human_reward_fn=human)
+    out = []
+    for bias in (0.0, 10.0):
+        state = trainer.init(jax.random.PRNGKey(0))
+        _, m = trainer.train_chunk(state, {"bias": jnp.float32(bias)})
+        out.append(float(m["sampled_reward"]))
+    np.testing.assert_allclose(out[1] - out[0], config.ddpg.reward_beta * 10.0, rtol=1e-4)
+    assert trainer.train_chunk._cache_size() == 1
+
+
+def test_train_vmaps_over_seeds():
+    config = tiny_config(total_env_steps=400)
+    trainer = make_train(config, PointReachEnv())
+    states, metrics = jax.jit(jax.vmap(trainer.train))(jax.random.split(jax.random.PRNGKey(0), 2))
+    assert metrics["critic_loss"].shape == (2, config.train.num_chunks)
+    assert np.isfinite(np.asarray(metrics["critic_loss"])[:, -1]).all()
+    k = states.actor_params["params"]["Dense_0"]["kernel"]
+    assert k.shape[0] == 2 and not np.allclose(k[0], k[1])
+    assert np.asarray(states.iteration).tolist() == [config.train.iterations] * 2
+    # The replay holds every step of every env (no overflow at this size).
+    assert np.asarray(states.replay.size).tolist() == [config.train.iterations * config.train.num_envs] * 2
