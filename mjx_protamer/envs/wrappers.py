@@ -50,39 +50,50 @@ class EpisodeWrapper(Wrapper):
 TRANSITION_INFO_KEYS = ("truncation",)
 
 
-class AutoResetWrapper(Wrapper):
-    """Resets a finished episode in place; `info["final_obs"]` keeps the observation reached.
+def _where_batch(mask: jax.Array, on_true, on_false):
+    """Per-env select over a batched pytree: mask (B,) broadcast against each leaf's leading axis."""
+    def pick(a, b):
+        return jnp.where(mask.reshape(mask.shape + (1,) * (b.ndim - 1)), a, b)
+    return jax.tree.map(pick, on_true, on_false)
 
-    Carried state lives in `info` and is reset; what a transition produced lives in `metrics`
-    (reward terms, contact signals) and is kept. The reset uses a key carried in `info["reset_rng"]`, so batched envs reset independently and a
-    seed fixes the whole sequence of episodes.
+
+class AutoResetWrapper(Wrapper):
+    """Resets finished episodes of a BATCHED env (wrap a VmapWrapper) in place.
+
+    A fresh reset (settling physics steps) is computed only when some env finished, under one
+    `lax.cond` on the whole batch: inside vmap the condition would become a select and every step
+    would pay for a reset. Carried state lives in `info` and is reset; what the transition produced
+    lives in `metrics`, `reward` and `done` and is kept; `info["final_obs"]` is the observation the
+    step reached before any reset. Reset keys are carried in `info["reset_rng"]`, so a seed fixes the
+    whole sequence of episodes.
     """
 
     def reset(self, rng: jax.Array) -> State:
-        rng, carry = jax.random.split(rng)
-        state = self.env.reset(rng)
-        info = dict(state.info, reset_rng=carry, final_obs=state.obs, episodes=jnp.zeros((), jnp.int32))
+        keys = jax.vmap(jax.random.split)(rng)
+        state = self.env.reset(keys[:, 0])
+        info = dict(state.info, reset_rng=keys[:, 1], final_obs=state.obs,
+                    episodes=jnp.zeros(state.done.shape, jnp.int32))
         return state.replace(info=info)
 
     def step(self, state: State, action: jax.Array) -> State:
         nstate = self.env.step(state, action)
-        rng, reset_rng = jax.random.split(state.info["reset_rng"])
-        fresh = self.env.reset(reset_rng)
+        keys = jax.vmap(jax.random.split)(state.info["reset_rng"])
         done = nstate.done > 0
-        where_done = lambda reset_value, current: jnp.where(done, reset_value, current)
 
-        data = jax.tree.map(where_done, fresh.data, nstate.data)
-        info = dict(nstate.info)
-        for k, v in fresh.info.items():
-            if k not in TRANSITION_INFO_KEYS:
-                info[k] = jax.tree.map(where_done, v, nstate.info[k])
-        info.update(
-            reset_rng=rng,
-            final_obs=nstate.obs,
-            episodes=state.info["episodes"] + done.astype(jnp.int32),
-        )
-        obs = where_done(fresh.obs, nstate.obs)
-        # reward, done and metrics describe the step just taken and are kept as they are.
+        def reset_finished(_):
+            fresh = self.env.reset(keys[:, 1])
+            info = {k: v for k, v in nstate.info.items()}
+            for k, v in fresh.info.items():
+                if k not in TRANSITION_INFO_KEYS:
+                    info[k] = _where_batch(done, v, nstate.info[k])
+            return _where_batch(done, fresh.data, nstate.data), _where_batch(done, fresh.obs, nstate.obs), info
+
+        def keep(_):
+            return nstate.data, nstate.obs, dict(nstate.info)
+
+        data, obs, info = jax.lax.cond(jnp.any(done), reset_finished, keep, None)
+        info.update(reset_rng=keys[:, 0], final_obs=nstate.obs,
+                    episodes=state.info["episodes"] + done.astype(jnp.int32))
         return nstate.replace(data=data, obs=obs, info=info)
 
 
@@ -97,5 +108,5 @@ class VmapWrapper(Wrapper):
 
 
 def wrap_for_training(env, episode_length: int):
-    """Episode limit + auto-reset + vmap: reset takes (num_envs, 2) keys."""
-    return VmapWrapper(AutoResetWrapper(EpisodeWrapper(env, episode_length)))
+    """Episode limit + vmap + auto-reset: reset takes (num_envs, 2) keys, step a batch."""
+    return AutoResetWrapper(VmapWrapper(EpisodeWrapper(env, episode_length)))

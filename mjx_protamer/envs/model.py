@@ -1,0 +1,94 @@
+"""The compiled self-touch model: MjModel, sensing tables, index sets and the settled start state.
+
+Shared by the MJX env and the native-MuJoCo twin so both read the same joints, actuators and tables.
+Built once per configuration (cached): the touch tables take about two seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import mujoco
+import numpy as np
+
+from mjx_protamer.envs import body
+from mjx_protamer.envs.config import EnvConfig
+from mjx_protamer.envs.sensing import SensingTables, build_sensing_tables
+from mjx_protamer.envs.touch import build_touch_tables
+
+SETTLE_STEPS = 400  # 2 s at rest targets before the first episode
+
+
+@dataclasses.dataclass(frozen=True)
+class SelfTouchModel:
+    mj_model: mujoco.MjModel
+    sensing: SensingTables
+    qpos_idx: np.ndarray
+    qvel_idx: np.ndarray
+    torque_idx: np.ndarray
+    speed_idx: np.ndarray
+    ctrl_lo: np.ndarray
+    ctrl_hi: np.ndarray
+    rest_ctrl: np.ndarray
+    init_qpos: np.ndarray
+    init_qvel: np.ndarray
+    init_warmstart: np.ndarray
+
+    def action_to_ctrl(self, xp, action):
+        """Policy action in [-1, 1] -> position targets, affinely onto each joint's range."""
+        a = xp.clip(action, -1.0, 1.0)
+        return self.ctrl_lo + 0.5 * (a + 1.0) * (self.ctrl_hi - self.ctrl_lo)
+
+
+def _name_ids(m: mujoco.MjModel, obj: mujoco.mjtObj, names) -> np.ndarray:
+    ids = [mujoco.mj_name2id(m, obj, n) for n in names]
+    missing = [n for n, i in zip(names, ids) if i < 0]
+    if missing:
+        raise ValueError(f"model has no {obj.name} named {missing}")
+    return np.array(ids)
+
+
+@functools.lru_cache(maxsize=8)
+def build_model(config: EnvConfig) -> SelfTouchModel:
+    m = mujoco.MjModel.from_xml_string(body.infant_xml(config.physics.options()))
+    geom_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) for i in range(m.ngeom)]
+    touch = build_touch_tables(k=config.k, spacing_hand=config.touch.spacing_hand,
+                               spacing_fingers=config.touch.spacing_fingers,
+                               spread_factor=config.touch.spread_factor)
+    sensing = build_sensing_tables(geom_names, touch)
+
+    jnt = mujoco.mjtObj.mjOBJ_JOINT
+    qpos_idx = m.jnt_qposadr[_name_ids(m, jnt, config.qpos_joints)]
+    qvel_idx = m.jnt_dofadr[_name_ids(m, jnt, config.qvel_joints)]
+    speed_idx = m.jnt_dofadr[_name_ids(m, jnt, config.speed_joints)]
+    torque_idx = _name_ids(m, mujoco.mjtObj.mjOBJ_ACTUATOR, config.torque_actuators)
+    act_ids = _name_ids(m, mujoco.mjtObj.mjOBJ_ACTUATOR, body.ACTUATED_JOINTS)
+    assert (act_ids == np.arange(m.nu)).all(), "actuators must be declared in action order"
+
+    # Settle at the rest pose with natively simulated physics; every episode starts from here.
+    d = mujoco.MjData(m)
+    rest = np.array([math.radians(body.REST_POSE_DEG[n.split("_", 1)[1]]) for n in body.ACTUATED_JOINTS])
+    for name in ("left_fingers", "right_fingers"):
+        d.qpos[m.jnt_qposadr[mujoco.mj_name2id(m, jnt, name)]] = math.radians(body.FINGER_REST_DEG)
+    for i, name in enumerate(body.ACTUATED_JOINTS):
+        d.qpos[m.jnt_qposadr[mujoco.mj_name2id(m, jnt, name)]] = rest[i]
+    d.ctrl[:] = rest
+    for _ in range(SETTLE_STEPS):
+        mujoco.mj_step(m, d)
+    return SelfTouchModel(
+        mj_model=m, sensing=sensing, qpos_idx=qpos_idx, qvel_idx=qvel_idx, torque_idx=torque_idx,
+        speed_idx=speed_idx, ctrl_lo=m.actuator_ctrlrange[:, 0].copy(), ctrl_hi=m.actuator_ctrlrange[:, 1].copy(),
+        rest_ctrl=rest, init_qpos=d.qpos.copy(), init_qvel=d.qvel.copy(), init_warmstart=d.qacc_warmstart.copy(),
+    )
+
+
+def observe(xp, model: SelfTouchModel, touch, qpos, qvel, actuator_force):
+    """The observation: [s_left(k), s_right(k), s_qpos, s_qvel, s_torque]."""
+    return xp.concatenate([touch, qpos[model.qpos_idx], qvel[model.qvel_idx], actuator_force[model.torque_idx]])
+
+
+def arm_speed(xp, model: SelfTouchModel, qvel):
+    """Norm of the arm joints' speeds (rad/s): the freeze metric and the movement-band reward."""
+    return xp.sqrt(xp.sum(qvel[model.speed_idx] ** 2))

@@ -1,0 +1,24 @@
+"""The intrinsic reward: contact, novelty, region, movement band, energy and joint limits.
+
+Written once for NumPy and JAX (`xp`). The terms are returned unweighted, in
+`config.REWARD_TERMS` order; the reward is their dot product with `RewardConfig.weights()`, which a
+learner can redo at sample time (relabelling) from the stored terms.
+"""
+
+from __future__ import annotations
+
+from mjx_protamer.envs.config import RewardConfig
+
+
+def reward_terms(xp, cfg: RewardConfig, touch, prev_touch, regions, prev_regions, arm_speed, torque, action):
+    contact = cfg.contact_scale * xp.tanh(cfg.contact_gain * xp.sum(xp.abs(touch)))
+    novelty = xp.sqrt(xp.sum((touch - prev_touch) ** 2))
+    # New regions: the touched set is not a subset of the previous step's set.
+    new_region = xp.any(regions & ~prev_regions)
+    region = xp.where(new_region, cfg.region_new, cfg.region_stale)
+    movement = cfg.movement_penalty * ((arm_speed < cfg.speed_low).astype(touch.dtype)
+                                       + (arm_speed > cfg.speed_high).astype(touch.dtype))
+    energy = -cfg.energy_coef * xp.sum(torque**2)
+    joint_limit = -cfg.limit_coef * xp.sum(xp.clip(xp.abs(action) - cfg.limit_threshold, 0.0, 1.0))
+    return xp.stack([xp.asarray(t, dtype=touch.dtype) for t in
+                     (contact, novelty, region, movement, energy, joint_limit)])

@@ -1,0 +1,115 @@
+"""The self-touch environment on MuJoCo-MJX: pure `reset(rng) -> State`, `step(state, action) -> State`.
+
+Written for one world; `wrappers.wrap_for_training` batches it. One control step is one physics step
+(5 ms); the touch observation, regions and reward are computed from the step's MJX contacts with the
+shared NumPy/JAX code in `sensing.py` and `reward.py`.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from mujoco import mjx
+
+from mjx_protamer.envs import body, sensing
+from mjx_protamer.envs.base import State
+from mjx_protamer.envs.config import REWARD_TERMS, EnvConfig
+from mjx_protamer.envs.model import arm_speed, build_model, observe
+from mjx_protamer.envs.reward import reward_terms
+
+
+class SelfTouchEnv:
+    def __init__(self, config: EnvConfig | None = None):
+        self.config = config or EnvConfig()
+        self.model = build_model(self.config)
+        m = self.model.mj_model
+        self.mjx_model = mjx.put_model(m)
+        self.observation_size = self.config.observation_size
+        self.action_size = m.nu
+        self.reward_term_names = REWARD_TERMS
+        self.reward_weights = self.config.reward.weights()
+        self._tables = self.model.sensing.as_xp(jnp)
+        self._weights = jnp.asarray(self.reward_weights, jnp.float32)
+
+        d = mjx.make_data(self.mjx_model)
+        d = d.replace(qpos=jnp.asarray(self.model.init_qpos, jnp.float32),
+                      qvel=jnp.asarray(self.model.init_qvel, jnp.float32),
+                      ctrl=jnp.asarray(self.model.rest_ctrl, jnp.float32),
+                      qacc_warmstart=jnp.asarray(self.model.init_warmstart, jnp.float32))
+        self.init_data = jax.jit(mjx.forward)(self.mjx_model, d)
+        # Contact slots are grouped by condim in MJX; each slot's dimension is fixed by the model.
+        contact = self.init_data._impl.contact
+        dim = np.asarray(contact.dim)
+        self._n_pyramid = np.where(dim == 1, 1, 2 * (dim - 1))
+
+    # --- contacts and sensing -------------------------------------------------------------------
+    def contacts(self, d: mjx.Data):
+        """MJX contact slots as (geom pairs, positions, penetration, normal force)."""
+        c = d._impl.contact
+        efc_force = d._impl.efc_force
+        offsets = jnp.arange(4)
+        rows = jnp.clip(c.efc_address[:, None] + offsets[None, :], 0, efc_force.shape[0] - 1)
+        used = offsets[None, :] < jnp.asarray(self._n_pyramid)[:, None]
+        normal = jnp.sum(efc_force[rows] * used, axis=1) * (c.efc_address >= 0)
+        return c.geom, c.pos, c.dist, normal
+
+    def sense(self, d: mjx.Data):
+        """Touch features, main region mask (8,) and extended region mask (4,) of a forwarded state."""
+        geom, pos, dist, normal = self.contacts(d)
+        return sensing.sense(jnp, self._tables, self.config.k, geom, pos, dist, normal,
+                             d.geom_xpos, d.geom_xmat)
+
+    def _transition(self, d, touch, regions, extended, prev_touch, prev_regions, action):
+        speed = arm_speed(jnp, self.model, d.qvel)
+        terms = reward_terms(jnp, self.config.reward, touch, prev_touch, regions, prev_regions, speed,
+                             d.actuator_force, action)
+        obs = observe(jnp, self.model, touch, d.qpos, d.qvel, d.actuator_force)
+        metrics = {
+            "reward_terms": terms,
+            "self_contact": jnp.any(regions).astype(jnp.float32),
+            "region_mask": regions.astype(jnp.float32),
+            "extended_region_mask": extended.astype(jnp.float32),
+            "arm_speed": speed,
+        }
+        return obs, terms @ self._weights, metrics
+
+    # --- the env API ----------------------------------------------------------------------------
+    def reset(self, rng: jax.Array) -> State:
+        rng, noise_rng = jax.random.split(rng)
+        half_range = jnp.asarray(0.5 * (self.model.ctrl_hi - self.model.ctrl_lo), jnp.float32)
+        rest = jnp.asarray(self.model.rest_ctrl, jnp.float32)
+        noise = jax.random.normal(noise_rng, (self.config.reset_noise_steps, self.action_size))
+        targets = jnp.clip(rest + self.config.reset_noise_scale * half_range * noise,
+                           self.model.ctrl_lo, self.model.ctrl_hi)
+
+        def settle(d, ctrl):
+            return mjx.step(self.mjx_model, d.replace(ctrl=ctrl)), None
+
+        d, _ = jax.lax.scan(settle, self.init_data, targets)
+        touch, regions, extended = self.sense(d)
+        zero_action = jnp.zeros(self.action_size)
+        obs, _, metrics = self._transition(d, touch, regions, extended, touch, regions, zero_action)
+        metrics = dict(metrics, reward_terms=jnp.zeros_like(metrics["reward_terms"]), nan_reset=jnp.zeros(()))
+        info = {"prev_touch": touch, "prev_regions": regions, "rng": rng}
+        return State(data=d, obs=obs, reward=jnp.zeros(()), done=jnp.zeros(()), metrics=metrics, info=info)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        if action.shape != (self.action_size,):
+            raise ValueError(f"action must have shape ({self.action_size},) per env, got {action.shape}")
+        ctrl = self.model.action_to_ctrl(jnp, action).astype(jnp.float32)
+        d = mjx.step(self.mjx_model, state.data.replace(ctrl=ctrl))
+        # A diverged state would poison a batch: restore the settled start and end the episode.
+        bad = ~(jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel)))
+        d = jax.tree.map(lambda init, x: jnp.where(bad, init, x), self.init_data, d)
+        touch, regions, extended = self.sense(d)
+        obs, reward, metrics = self._transition(d, touch, regions, extended, state.info["prev_touch"],
+                                                state.info["prev_regions"], action)
+        metrics["nan_reset"] = bad.astype(jnp.float32)
+        info = dict(state.info, prev_touch=touch, prev_regions=regions)
+        return state.replace(data=d, obs=obs, reward=reward, done=bad.astype(jnp.float32), metrics=metrics,
+                             info=info)
+
+
+def region_names() -> tuple[str, ...]:
+    return body.REGIONS

@@ -1,0 +1,135 @@
+"""Touch features and body regions from a list of contacts, written once for NumPy and JAX.
+
+`xp` is `numpy` (the native-MuJoCo twin, float64) or `jax.numpy` (the MJX env, float32); the few
+operations the two spell differently (top-k, scatter-add) go through `Ops`. Inputs are contact
+arrays as both simulators give them: geom pairs, world positions, penetration and normal force.
+
+Per hand geom (left palm, left fingers, right palm, right fingers) the feature is
+[contact position relative to the geom (3), forces of the k sensors nearest the contact (k)],
+averaged over that geom's self-contacts, zeros without contact: 4 * (k + 3) values, which are the
+spec's s_left(k) followed by s_right(k).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from mjx_protamer.envs import body
+from mjx_protamer.envs.touch import TouchTables, project_to_surface
+
+N_REGIONS = len(body.REGIONS)
+N_EXTENDED = len(body.EXTENDED_REGIONS)
+
+
+@dataclasses.dataclass(frozen=True)
+class Ops:
+    xp: Any
+
+    def nearest_k(self, d, k: int):
+        if self.xp is np:
+            return np.argsort(d, axis=-1, kind="stable")[..., :k]
+        import jax
+
+        return jax.lax.top_k(-d, k)[1]
+
+    def scatter_add(self, target, index, values):
+        if self.xp is np:
+            out = target.copy()
+            np.add.at(out, index, values)
+            return out
+        return target.at[index].add(values)
+
+
+@dataclasses.dataclass(frozen=True)
+class SensingTables:
+    """Static per-model tables (numpy; the JAX env converts them once)."""
+
+    touch: TouchTables
+    geom_hand: np.ndarray  # (ngeom,) 0..3 for hand geoms, -1 otherwise
+    geom_region: np.ndarray  # (ngeom,) 0..7 main regions, 8..11 extended, -1 for the floor
+    hand_excluded_region: np.ndarray  # (4,) region a hand geom may not count (its own lower arm)
+
+    def as_xp(self, xp) -> dict[str, Any]:
+        t = self.touch
+        return {
+            "sensors": xp.asarray(t.sensors), "candidates": xp.asarray(t.candidates),
+            "grid_origin": xp.asarray(t.grid_origin), "grid_cell": xp.asarray(t.grid_cell),
+            "grid_dims": xp.asarray(t.grid_dims), "grid_offset": xp.asarray(t.grid_offset),
+            "spread_radius": xp.asarray(t.spread_radius), "radius": xp.asarray(t.radius),
+            "half_length": xp.asarray(t.half_length), "geom_hand": xp.asarray(self.geom_hand),
+            "geom_region": xp.asarray(self.geom_region),
+            "hand_excluded_region": xp.asarray(self.hand_excluded_region),
+        }
+
+
+def build_sensing_tables(geom_names: list[str], touch: TouchTables) -> SensingTables:
+    regions = list(body.REGIONS) + list(body.EXTENDED_REGIONS)
+    geom_hand = np.array([body.HAND_GEOMS.index(g) if g in body.HAND_GEOMS else -1 for g in geom_names],
+                         dtype=np.int32)
+    geom_region = np.array(
+        [regions.index(body.GEOM_REGION[g]) if g in body.GEOM_REGION else -1 for g in geom_names],
+        dtype=np.int32)
+    excluded = np.array([regions.index(body.OWN_EXCLUDED_REGION[h.split("_")[0]]) for h in body.HAND_GEOMS],
+                        dtype=np.int32)
+    return SensingTables(touch=touch, geom_hand=geom_hand, geom_region=geom_region,
+                         hand_excluded_region=excluded)
+
+
+def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geom_xpos, geom_xmat):
+    """Touch features (4 * (k + 3),), main region mask (8,) and extended region mask (4,).
+
+    geom (n, 2) int, pos (n, 3), dist (n,), normal_force (n,): the contacts (inactive ones allowed:
+    dist >= 0 ignores them). geom_xpos (ngeom, 3), geom_xmat (ngeom, 3, 3): geom frames.
+    """
+    ops = Ops(xp)
+    n_sensors = tables["sensors"].shape[0] - 1
+    # Each contact is seen from both of its geoms: a palm touching the other palm touches both hands.
+    own = xp.concatenate([geom[:, 0], geom[:, 1]])
+    other = xp.concatenate([geom[:, 1], geom[:, 0]])
+    p_world = xp.concatenate([pos, pos])
+    force = xp.concatenate([normal_force, normal_force])
+    active = xp.concatenate([dist < 0, dist < 0])
+
+    hand = tables["geom_hand"][own]
+    region = tables["geom_region"][other]
+    is_hand = hand >= 0
+    hand_i = xp.where(is_hand, hand, 0)
+    valid = active & is_hand & (region >= 0) & (region != tables["hand_excluded_region"][hand_i])
+
+    # Contact position in the hand geom's frame (row vectors: R^T (p - x) == (p - x) @ R).
+    rel = p_world - geom_xpos[own]
+    p_local = xp.einsum("ni,nij->nj", rel, geom_xmat[own])
+    q = project_to_surface(xp, p_local, tables["half_length"][hand_i], tables["radius"][hand_i])
+
+    # Candidate sensors from the voxel grid of the hand geom.
+    cell = tables["grid_cell"][hand_i][:, None]
+    dims = tables["grid_dims"][hand_i]
+    ijk = xp.floor((q - tables["grid_origin"][hand_i]) / cell).astype(dims.dtype)
+    ijk = xp.clip(ijk, 0, dims - 1)
+    voxel = tables["grid_offset"][hand_i] + (ijk[:, 0] * dims[:, 1] + ijk[:, 1]) * dims[:, 2] + ijk[:, 2]
+    cand = tables["candidates"][voxel]  # (2n, C)
+    d = xp.sqrt(xp.sum((tables["sensors"][cand] - q[:, None, :]) ** 2, axis=-1))  # (2n, C)
+    nearest = ops.nearest_k(d, k)  # (2n, k), nearest first
+    ids = xp.take_along_axis(cand, nearest, axis=1)
+
+    # Spread each contact's normal force over the sensors within the radius, conserving its sum.
+    w = xp.clip(1.0 - d / tables["spread_radius"][hand_i][:, None], 0.0, None) * (cand < n_sensors)
+    w_sum = xp.sum(w, axis=1, keepdims=True)
+    nearest_onehot = (xp.arange(cand.shape[1])[None, :] == nearest[:, :1]).astype(w.dtype)
+    w = xp.where(w_sum > 0, w / xp.where(w_sum > 0, w_sum, 1.0), nearest_onehot)
+    contribution = (force * valid)[:, None] * w
+    field = ops.scatter_add(xp.zeros(n_sensors + 1, dtype=w.dtype), cand.reshape(-1), contribution.reshape(-1))
+    readings = field[ids]  # (2n, k)
+
+    features = xp.concatenate([p_local, readings], axis=1) * valid[:, None]
+    onehot = (hand_i[:, None] == xp.arange(4)[None, :]) & valid[:, None]  # (2n, 4)
+    count = xp.sum(onehot, axis=0)
+    summed = xp.einsum("nh,nf->hf", onehot.astype(features.dtype), features)
+    touch = (summed / xp.maximum(count, 1)[:, None]).reshape(-1)
+
+    region_hits = (region[:, None] == xp.arange(N_REGIONS + N_EXTENDED)[None, :]) & valid[:, None]
+    touched = xp.any(region_hits, axis=0)
+    return touch, touched[:N_REGIONS], touched[N_REGIONS:]
