@@ -17,6 +17,7 @@ COMMAND_MODULES = (
     "mjx_protamer.commands.bench",
     "mjx_protamer.commands.voice",
     "mjx_protamer.commands.train",
+    "mjx_protamer.commands.feedback",
 )
 
 

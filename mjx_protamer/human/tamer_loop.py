@@ -1,0 +1,214 @@
+"""DDPG + DeepTAMER on the host: jitted DDPG chunks, and between them the feedback path.
+
+One iteration of the loop (`TamerRun.step_chunk`):
+
+1. `trainer.train_chunk(state, model.params)`: `chunk_steps` DDPG iterations in one jit; the reward at
+   sample time is `alpha * r_env + beta * r_hat(params, s, a)`; the params are an argument (no recompile).
+2. The watched env's steps of the chunk (obs, action, reward terms) are read back from the DDPG replay
+   rows the chunk wrote (row `ptr + i * num_envs + watch_env` for iteration i).
+3. Time mapping: the chunk's steps are stamped on the `StepClock` at their presentation times
+   (`record_chunk(first_step, n, t0, dt)`): with a simulated teacher on a `VirtualClock` that advances
+   by dt per step (real-time-equivalent), live from the wall-clock moment the chunk is shown.
+4. A simulated teacher (if any) scores the steps and schedules events; those due are put into the real
+   `FeedbackQueue`. Then the queue is drained (events logged), each event is credited
+   (`CreditAssigner`, step or time window, minimum interval), the credited (obs, action, weight, value)
+   rows go to the reward model (one update each) and the periodic replay runs (`replay_every` steps).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjx_protamer.config import check
+from mjx_protamer.human.clock import StepClock, VirtualClock
+from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory
+from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
+from mjx_protamer.human.reward_model import RewardModel, RewardModelConfig
+from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, signal_matrix, with_channel
+
+
+@dataclasses.dataclass(frozen=True)
+class FeedbackConfig:
+    """The human side of a run: credit, reward model, simulated teacher and timing."""
+
+    credit: CreditConfig = dataclasses.field(default_factory=CreditConfig)
+    reward_model: RewardModelConfig = dataclasses.field(default_factory=RewardModelConfig)
+    teacher: TeacherConfig = dataclasses.field(default_factory=TeacherConfig)
+    dt: float = 0.005  # presentation period of one env step (s): the env's control period in real time
+    watch_env: int = 0  # the env of the batch the teacher (or human) watches
+    queue_size: int = 256
+    seed: int = 0
+
+    def validate(self) -> None:
+        check(self.dt > 0, "dt", f"must be > 0, got {self.dt}")
+        check(self.watch_env >= 0, "watch_env", f"must be >= 0, got {self.watch_env}")
+        check(self.queue_size >= 1, "queue_size", f"must be >= 1, got {self.queue_size}")
+
+
+def _pretrain_config_type():
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    return PretrainConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class FeedbackRunConfig:
+    """configs/feedback_*.yaml: a pretrain config (env, ddpg, train) plus the feedback section."""
+
+    pretrain: Any = dataclasses.field(default_factory=lambda: _pretrain_config_type()())
+    feedback: FeedbackConfig = dataclasses.field(default_factory=FeedbackConfig)
+
+    def validate(self) -> None:
+        check(self.feedback.watch_env < self.pretrain.train.num_envs, "feedback.watch_env",
+              f"must be < train.num_envs ({self.pretrain.train.num_envs})")
+
+
+def load_feedback_config(path=None, overrides=None) -> FeedbackRunConfig:
+    """Load a FeedbackRunConfig; the `pretrain` section is a PretrainConfig (DDPG engineer's)."""
+    import yaml
+
+    from mjx_protamer.config import ConfigError, apply_overrides, from_dict
+
+    raw: dict = {}
+    if path is not None:
+        if not Path(path).is_file():
+            raise ConfigError(f"config file {path} does not exist")
+        raw = yaml.safe_load(Path(path).read_text()) or {}
+    apply_overrides(raw, list(overrides or []))
+    unknown = sorted(set(raw) - {"pretrain", "feedback"})
+    if unknown:
+        raise ConfigError(f"unknown config key(s) {', '.join(unknown)}; allowed keys: feedback, pretrain")
+    pre = from_dict(_pretrain_config_type(), raw.get("pretrain"))
+    fb = from_dict(FeedbackConfig, raw.get("feedback"))
+    cfg = FeedbackRunConfig(pretrain=pre, feedback=fb)
+    cfg.validate()
+    return cfg
+
+
+class TamerRun:
+    """DDPG with (or without) DeepTAMER, one chunk at a time. `feedback` is one of:
+
+    - None: DDPG alone (the reward model is not passed to DDPG);
+    - "simulated:keyboard" / "simulated:prosody" / "simulated:speech": a host simulated teacher on a
+      virtual clock feeds the queue;
+    - "queue": events come from outside (keyboard thread, voice front end) on the wall clock.
+    """
+
+    def __init__(self, config: FeedbackRunConfig, env, feedback: str | None = None, queue: FeedbackQueue | None = None,
+                 log_path: str | Path | None = None, state=None, clock: Callable[[], float] | None = None):
+        from mjx_protamer.agents.ddpg.train import make_train
+
+        self.config = config
+        fc, tc = config.feedback, config.pretrain.train
+        self.env = env
+        self.feedback = feedback
+        self.use_model = feedback is not None
+        self.model = RewardModel(fc.reward_model, env.observation_size, env.action_size, seed=fc.seed)
+        self.trainer = make_train(config.pretrain, env, human_reward_fn=self.model.apply if self.use_model else None,
+                                  devices=jax.devices()[:1])
+        self.state = self.trainer.init(jax.random.PRNGKey(tc.seed)) if state is None else state
+        capacity = self.state.replay.capacity
+        if capacity < tc.chunk_steps * tc.num_envs:
+            raise ValueError(f"the DDPG replay ({capacity} rows) must hold one chunk "
+                             f"({tc.chunk_steps} x {tc.num_envs} envs) to read the watched env's steps back")
+        self.simulated = feedback is not None and feedback.startswith("simulated")
+        live = feedback is not None and not self.simulated
+        self.clock = clock or (time.time if live else VirtualClock(start=time.time()))
+        self.queue = queue or FeedbackQueue(fc.queue_size, clock=self.clock)
+        self.log = FeedbackLog(log_path) if log_path is not None else None
+        history = max(4096, 2 * tc.chunk_steps + int(fc.credit.delay_max_s / fc.dt) + 64)
+        self.step_clock = StepClock(fc.dt, capacity=history)
+        self.history = StepHistory(history, env.observation_size, env.action_size)
+        self.assigner = CreditAssigner(fc.credit, self.step_clock)
+        self.teacher = None
+        if self.simulated:
+            kind = feedback.split(":", 1)[1] if ":" in feedback else fc.teacher.channel.kind
+            self.teacher = HostTeacher(with_channel(fc.teacher, kind), fc.dt, seed=fc.seed)
+        self.first_step = 0
+        self.credited = 0
+        self.events = 0
+        self.human_params = self.model.params if self.use_model else None
+
+    def _watched_rows(self, ptr_before: int) -> dict[str, np.ndarray]:
+        tc = self.config.pretrain.train
+        rows = (ptr_before + np.arange(tc.chunk_steps) * tc.num_envs + self.config.feedback.watch_env) \
+            % self.state.replay.capacity
+        data = jax.device_get(jax.tree.map(lambda x: x[jnp.asarray(rows)], self.state.replay.data))
+        return {"obs": data.obs, "action": data.action, "reward_terms": data.reward_terms}
+
+    def step_chunk(self, t0: float | None = None) -> dict:
+        """One DDPG chunk, then the feedback path. `t0`: presentation time of the chunk's first step
+        (default: the clock now). Returns the chunk's metrics plus feedback counters."""
+        tc, fc = self.config.pretrain.train, self.config.feedback
+        ptr_before = int(self.state.replay.ptr)
+        params = self.model.params if self.use_model else None
+        self.state, metrics = self.trainer.train_chunk(self.state, params)
+        metrics = jax.device_get(metrics)
+        rows = self._watched_rows(ptr_before)
+        n, first = tc.chunk_steps, self.first_step
+        t0 = self.clock() if t0 is None else t0
+        if len(self.step_clock):  # a chunk computed faster than real time is shown after the previous one
+            t0 = max(t0, self.step_clock.time_of(self.step_clock.last_step) + fc.dt)
+        times = self.step_clock.record_chunk(first, n, t0, fc.dt)
+        if isinstance(self.clock, VirtualClock):
+            self.clock.set(t0 + n * fc.dt)
+        self.history.record(first, rows["obs"], rows["action"])
+        if self.teacher is not None:
+            sig = signal_matrix(self.teacher.config.signals, tuple(self.env.reward_term_names),
+                                rows["reward_terms"], obs=rows["obs"], action=rows["action"])
+            self.teacher.observe(first, times, sig)
+            self.teacher.emit_due(self.queue, self.clock())
+        accepted = self.process_events(step=first + n - 1)
+        if self.use_model:
+            self.model.maybe_replay(n)
+        self.first_step += n
+        out = dict(metrics)
+        out.update(feedback_events=len(accepted), feedback_total=self.events, credited_rows=self.credited,
+                   reward_model_updates=self.model.updates, reward_model_loss=self.model.last_loss,
+                   **{f"queue_{k}": v for k, v in self.queue.stats().items()})
+        return out
+
+    def process_events(self, step: int) -> list:
+        """Drain, log, credit and learn from the queued events; returns the credits made."""
+        credits = []
+        for event in self.queue.drain(self.log, step=step):
+            self.events += 1
+            credit, why = self.assigner.assign(event)
+            if credit is None:
+                if self.log is not None:
+                    self.log.note(event="not credited", reason=why, t_start=event.t_start, value=event.value)
+                continue
+            obs, act, w, h = self.history.samples(credit)
+            if self.use_model:
+                self.model.add(obs, act, w, h)
+            self.credited += len(w)
+            credits.append(credit)
+        return credits
+
+    def close(self) -> None:
+        if self.log is not None:
+            self.log.note(event="end", queue=self.queue.stats(), dropped=self.assigner.dropped)
+            self.log.close()
+
+
+def rollout_actions(trainer, env, actor_params, episodes: int, steps: int, seed: int) -> dict[str, np.ndarray]:
+    """Deterministic-actor test episodes: per-step actions, reward terms and metrics, (E, T, ...)."""
+    @jax.jit
+    def run(params, keys):
+        state = jax.vmap(env.reset)(keys)
+
+        def step(s, _):
+            a = trainer.act(params, s.obs)
+            s = jax.vmap(env.step)(s, a)
+            return s, {"action": a, "reward_terms": s.metrics["reward_terms"], "reward": s.reward}
+
+        _, out = jax.lax.scan(step, state, None, length=steps)
+        return jax.tree.map(lambda x: jnp.swapaxes(x, 0, 1), out)
+
+    return jax.device_get(run(actor_params, jax.random.split(jax.random.PRNGKey(seed), episodes)))
