@@ -139,7 +139,7 @@ class AudioSource:
 class ArraySource(AudioSource):
     """An in-memory mono float32 array. `realtime=True` paces chunks at the speed of sound playback,
     so wall-clock times and latencies mean what they would with a microphone; otherwise chunks come as
-    fast as they are consumed, stamped from `t0` (default: now) as if played in real time."""
+    fast as they are consumed, stamped from `t0` (default: as if the recording ended just now)."""
 
     def __init__(self, audio: np.ndarray, sample_rate: int = 16000, chunk_s: float = 0.25,
                  realtime: bool = False, t0: float | None = None):
@@ -156,7 +156,11 @@ class ArraySource(AudioSource):
 
     def chunks(self) -> Iterator[tuple[float, np.ndarray]]:
         n = self.chunk_samples
-        t0 = time.time() if self.t0 is None else self.t0
+        t0 = self.t0
+        if t0 is None:
+            # real time: the audio starts now; faster than real time: stamped as if it had just been
+            # recorded (ending now), so no event carries a time in the future
+            t0 = time.time() if self.realtime else time.time() - self.audio.size / self.sample_rate
         for i in range(0, self.audio.size, n):
             t_chunk = t0 + i / self.sample_rate
             if self.realtime:

