@@ -23,7 +23,7 @@ def ev(value=1.0, t=None, source="keyboard", **details):
         (ev(-1.01), "outside [-1, 1]"),
         (ev(math.nan), "finite"),
         (ev(math.inf), "finite"),
-        (ev(1.0, t=time.time() + 60), "in the future"),
+        (ev(1.0, t=time.time() + 3600), "in the future"),
         (ev(1.0, source="telepathy"), "unknown source"),
         (FeedbackEvent(10.0, 9.0, "keyboard", 1.0), "before t_start"),
         (ev(1.0, obj=object()), "JSON"),
