@@ -108,6 +108,7 @@ def _measure(cfg, scorer, texts, repeats: int) -> dict:
         score_s.append(ev.details.get("score_s", float("nan")))
         values.append({"value": ev.value, **{k: ev.details[k] for k in ("transcript", "rule", "valence")
                                             if k in ev.details}})
+    lat = [float(v) for v in lat]
     return {"latency_s": statistics.median(lat) if lat else None,
             "latency_p90_s": float(np.percentile(lat, 90)) if lat else None,
             "vad_wait_median_s": statistics.median(vad_wait) if vad_wait else None,
@@ -167,8 +168,9 @@ def run_voice_benchmark(args) -> dict:
             result["whisper_latency_s"] = r["latency_s"]
     for k in ("prosody", "whisper"):
         if result.get(f"{k}_latency_s") is not None:
-            result[f"{k}_meets_target"] = result[f"{k}_latency_s"] < result["targets_s"][k]
-    return result
+            result[f"{k}_meets_target"] = bool(result[f"{k}_latency_s"] < result["targets_s"][k])
+    from audio_frontend.listen import _jsonable
+    return _jsonable(result)
 
 
 if __name__ == "__main__":  # python -m audio_frontend.bench  (the same as `protamer bench voice --json`)

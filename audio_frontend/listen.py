@@ -44,6 +44,8 @@ def _jsonable(x):
         return float(x) if np.isfinite(x) else None
     if isinstance(x, np.integer):
         return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
     return x
 
 
