@@ -100,9 +100,10 @@ def test_human_params_relabel_without_recompiling():
     out = []
     for bias in (0.0, 10.0):
         state = trainer.init(jax.random.PRNGKey(0))
-        _, m = trainer.train_chunk(state, {"bias": jnp.float32(bias)})
+        state, m = trainer.train_chunk(state, {"bias": jnp.float32(bias)})
         out.append(float(m["sampled_reward"]))
     np.testing.assert_allclose(out[1] - out[0], config.ddpg.reward_beta * 10.0, rtol=1e-4)
+    trainer.train_chunk(state, {"bias": jnp.float32(-1.0)})  # a chunk's output state is a valid input
     assert trainer.train_chunk._cache_size() == 1
 
 

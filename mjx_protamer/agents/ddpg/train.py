@@ -83,6 +83,12 @@ def _with_learner(ts: TrainState, lr: Learner) -> TrainState:
     return ts.replace(**lr._asdict())
 
 
+def _strong(tree):
+    """Drop weak types, so the state a chunk returns has exactly the types of the one it took (or the
+    second call would compile again: wrappers may produce weakly-typed leaves such as a `where(.., 1.0, 0.0)`)."""
+    return jax.tree.map(lambda x: x.astype(x.dtype) if isinstance(x, jax.Array) else x, tree)
+
+
 def resolve_devices(num_devices: int) -> list:
     devices = jax.devices()
     if num_devices == 0:
@@ -138,7 +144,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         actor_params = actor.init(k_actor, jnp.zeros((obs_size,)))
         critic_params = critic.init(k_critic, jnp.zeros((obs_size,)), jnp.zeros((act_size,)))
         env_state = venv.reset(jax.random.split(local_key(k_env), local_envs))
-        return TrainState(
+        return _strong(TrainState(
             actor_params=actor_params,
             critic_params=critic_params,
             target_actor_params=actor_params,
@@ -151,7 +157,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             rng=k_run,
             iteration=jnp.zeros((), jnp.int32),
             episode_return=jnp.zeros((local_envs,)),
-        )
+        ))
 
     def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params):
         """One DDPG update from a fresh minibatch: critic, then actor against the new critic, then targets."""
@@ -229,7 +235,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         else:
             update_stats, n_updates = jnp.zeros((4,)), jnp.float32(0.0)
         stats.update(update_stats=update_stats, updates=n_updates)
-        return ts.replace(rng=rng, iteration=ts.iteration + 1), stats
+        return _strong(ts.replace(rng=rng, iteration=ts.iteration + 1)), stats
 
     def _chunk(ts: TrainState, human_params):
         ts, stats = jax.lax.scan(lambda t, _: _iteration(t, human_params), ts, None, length=tc.chunk_steps)

@@ -1,0 +1,156 @@
+"""`protamer bench train`: end-to-end DDPG training throughput (env steps + updates), pure JAX vs SB3.
+
+Three measurements, in one process, each the median of `--repeats` timed runs after an untimed warm-up
+(the JAX warm-up pays the compile):
+
+- `steps_per_s`: pure-JAX DDPG with the paper's single-env hyper-parameters (1 env, one update of batch 64
+  per env step, 400-300 networks, OU noise), env + updates, one jitted chunk of `--steps` steps per run;
+- `sb3_steps_per_s`: Stable-Baselines3 DDPG with the same hyper-parameters (400-300, Adam 1e-3, gamma
+  0.99, tau 0.001, batch 64, replay 1e5, train_freq 1, gradient_steps 1, OU theta 0.15 sigma 0.6 dt 1) on
+  the NumPy/Gymnasium twin of the env (`mjx_protamer.envs.twin`; `--env toy` uses the toy env's twin).
+  SB3's critic takes the action at its input layer, not the second: the cost differs by a few hundred MACs;
+- `batched256_steps_per_s`: pure JAX with `--batched-envs` (256) envs and one update per vectorised step.
+
+`ratio_vs_sb3 = steps_per_s / sb3_steps_per_s`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import time
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--env", choices=("self_touch", "toy"), default="self_touch",
+                        help="env to train on (self_touch: MJX env vs its NumPy twin)")
+    parser.add_argument("--steps", type=int, default=1000, help="env steps per timed single-env JAX run")
+    parser.add_argument("--sb3-steps", type=int, default=500, help="env steps per timed SB3 run")
+    parser.add_argument("--batched-envs", type=int, default=256)
+    parser.add_argument("--batched-iterations", type=int, default=20,
+                        help="vectorised steps per timed batched run")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--skip-sb3", action="store_true", help="do not run Stable-Baselines3")
+
+
+def _config(env_name: str, num_envs: int, chunk_steps: int):
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.config import load_config
+
+    return load_config(PretrainConfig, None, [
+        f"env_name={env_name}", f"train.num_envs={num_envs}", f"train.chunk_steps={chunk_steps}",
+        f"train.total_env_steps={num_envs * chunk_steps * 4}", f"train.warmup_env_steps={max(64, num_envs)}",
+        "train.updates_per_step=1", "train.num_devices=1",
+    ] + (["train.episode_length=25"] if env_name == "toy" else []))
+
+
+def _time_jax(env, config, repeats: int) -> dict:
+    import jax
+
+    from mjx_protamer.agents.ddpg.train import make_train
+
+    trainer = make_train(config, env)
+    t0 = time.perf_counter()
+    state = trainer.init(jax.random.PRNGKey(0))
+    state, m = trainer.train_chunk(state, None)  # compile + warm-up (fills the replay past the warm-up)
+    jax.block_until_ready(m)
+    compile_s = time.perf_counter() - t0
+    steps = config.train.chunk_steps * config.train.num_envs
+    rates = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        state, m = trainer.train_chunk(state, None)
+        jax.block_until_ready(m)
+        rates.append(steps / (time.perf_counter() - t))
+    return {"median": statistics.median(rates), "runs": rates, "compile_s": compile_s}
+
+
+def _make_twin(env_name: str, episode_length: int):
+    if env_name == "toy":
+        from mjx_protamer.envs.toy_twin import PointReachGym
+
+        return PointReachGym(episode_length=episode_length)
+    import gymnasium as gym
+
+    from mjx_protamer.envs import twin
+
+    for name in ("make_gym_env", "make_env", "make"):
+        if hasattr(twin, name):
+            return getattr(twin, name)()
+    for value in vars(twin).values():
+        if isinstance(value, type) and issubclass(value, gym.Env) and value.__module__ == twin.__name__:
+            return gym.wrappers.TimeLimit(value(), max_episode_steps=episode_length)
+    raise RuntimeError("mjx_protamer.envs.twin has no Gymnasium env to benchmark")
+
+
+def _time_sb3(env_name: str, episode_length: int, steps: int, repeats: int) -> dict:
+    import numpy as np
+    import torch
+    from stable_baselines3 import DDPG
+    from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
+
+    env = _make_twin(env_name, episode_length)
+    act = env.action_space.shape[0]
+    noise = OrnsteinUhlenbeckActionNoise(mean=np.zeros(act), sigma=0.6 * np.ones(act), theta=0.15, dt=1.0)
+    model = DDPG(
+        "MlpPolicy", env, learning_rate=1e-3, buffer_size=100_000, learning_starts=64, batch_size=64,
+        tau=0.001, gamma=0.99, train_freq=1, gradient_steps=1, action_noise=noise,
+        policy_kwargs={"net_arch": {"pi": [400, 300], "qf": [400, 300]}}, device="cpu", seed=0, verbose=0,
+    )
+    model.learn(total_timesteps=64 + 100)  # past learning_starts, warm
+    rates = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        model.learn(total_timesteps=steps, reset_num_timesteps=False)
+        rates.append(steps / (time.perf_counter() - t))
+    return {"median": statistics.median(rates), "runs": rates, "torch_threads": torch.get_num_threads(),
+            "env": type(getattr(env, "unwrapped", env)).__module__ + "." + type(getattr(env, "unwrapped", env)).__name__}
+
+
+def run_train_benchmark(args: argparse.Namespace) -> dict:
+    import jax
+
+    from mjx_protamer.experiments.env_factory import make_env
+
+    single = _config(args.env, 1, args.steps)
+    env = make_env(single)
+    jax_single = _time_jax(env, single, args.repeats)
+    batched = _config(args.env, args.batched_envs, args.batched_iterations)
+    jax_batched = _time_jax(env, batched, args.repeats)
+    result = {
+        "env": args.env,
+        "steps_per_s": jax_single["median"],
+        "batched256_steps_per_s": jax_batched["median"],
+        "batched_envs": args.batched_envs,
+        "jax_single_runs": jax_single["runs"],
+        "jax_batched_runs": jax_batched["runs"],
+        "jax_single_compile_s": jax_single["compile_s"],
+        "jax_batched_compile_s": jax_batched["compile_s"],
+        "updates_per_env_step_single": 1,
+        "updates_per_vectorised_step_batched": 1,
+        "repeats": args.repeats,
+        "jax_backend": jax.default_backend(),
+        "devices": len(jax.devices()),
+        "machine": platform.processor() or platform.machine(),
+    }
+    if not args.skip_sb3:
+        sb3 = _time_sb3(args.env, single.train.episode_length, args.sb3_steps, args.repeats)
+        result.update(sb3_steps_per_s=sb3["median"], sb3_runs=sb3["runs"], sb3_torch_threads=sb3["torch_threads"],
+                      sb3_env=sb3["env"], ratio_vs_sb3=jax_single["median"] / sb3["median"])
+    else:
+        result.update(sb3_steps_per_s=None, ratio_vs_sb3=None)
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:  # `python -m mjx_protamer.experiments.bench_train` until wired
+    import json
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    print(json.dumps(run_train_benchmark(parser.parse_args(argv)), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
