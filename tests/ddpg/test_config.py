@@ -27,6 +27,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
         ("train.chunk_steps=abc", "train.chunk_steps"),
         ("train.warmup_env_steps=10000000", "train.warmup_env_steps"),
         ("env_name=cartpole", "env_name"),
+        ("env.k=0", "env.k"),
+        ("train.episode_length=500", "train.episode_length"),  # must match env.episode_length
     ],
 )
 def test_bad_values_name_the_field(override, field):

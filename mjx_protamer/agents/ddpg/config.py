@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from mjx_protamer.config import check
+from mjx_protamer.envs.config import EnvConfig
 from mjx_protamer.envs.toy import ToyEnvConfig
 
 
@@ -105,6 +106,7 @@ class PretrainConfig:
     """A whole `protamer pretrain` run: which env (with its config), the learner, the run settings."""
 
     env_name: Literal["self_touch", "toy"] = "self_touch"
+    env: EnvConfig = field(default_factory=EnvConfig)  # the self-touch env (used when env_name is self_touch)
     toy: ToyEnvConfig = field(default_factory=ToyEnvConfig)
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
@@ -112,3 +114,6 @@ class PretrainConfig:
     def validate(self) -> None:
         check(self.train.warmup_env_steps < self.train.iterations * self.train.num_envs, "train.warmup_env_steps",
               "is longer than the whole run, so nothing would be learned")
+        if self.env_name == "self_touch":
+            check(self.train.episode_length == self.env.episode_length, "train.episode_length",
+                  f"must equal env.episode_length ({self.env.episode_length}), got {self.train.episode_length}")
