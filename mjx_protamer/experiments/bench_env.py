@@ -70,7 +70,6 @@ def _timed(fn, repeats: int) -> tuple[float, list[float]]:
 # --- MJX ---------------------------------------------------------------------------------------------
 def _bench_mjx_env(env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
     import jax
-    import jax.numpy as jnp
 
     from mjx_protamer.envs.wrappers import wrap_for_training
 
