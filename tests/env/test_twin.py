@@ -60,7 +60,8 @@ def test_truncates_at_episode_length():
     assert flags == [False] * 4 + [True]
 
 
-def test_nan_state_resets_and_is_reported(twin):
+def test_nan_state_resets_and_is_reported(twin, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo logs the bad-state warning to ./MUJOCO_LOG.TXT
     twin.reset(seed=0)
     twin.data.qvel[:] = np.nan
     obs, reward, terminated, truncated, info = twin.step(np.zeros(14, np.float32))
