@@ -38,6 +38,19 @@ def register(subparsers) -> None:
     e.set_defaults(handler=_eval)
 
 
+def _enable_compile_cache() -> None:
+    """Persist XLA compiles across runs (the self-touch chunk takes minutes to compile on 2 CPU cores).
+    JAX_COMPILATION_CACHE_DIR, when set, wins."""
+    import os
+
+    import jax
+
+    if not os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        jax.config.update("jax_compilation_cache_dir",
+                          os.path.join(os.path.expanduser("~"), ".cache", "mjx_protamer", "jax"))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
 def _pretrain(args: argparse.Namespace) -> int:
     from mjx_protamer.agents.ddpg.config import PretrainConfig
     from mjx_protamer.config import ConfigError, load_config
@@ -45,6 +58,7 @@ def _pretrain(args: argparse.Namespace) -> int:
     if args.resume and args.out is None:
         raise ConfigError("--resume needs --out, the run directory to continue")
     config = load_config(PretrainConfig, args.config, args.overrides)
+    _enable_compile_cache()
     out = args.out or Path("runs") / time.strftime("pretrain-%Y%m%d-%H%M%S")
 
     from mjx_protamer.experiments.pretrain import report, run_pretrain
@@ -59,6 +73,7 @@ def _eval(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ConfigError(f"--episodes must be >= 1, got {args.episodes}")
+    _enable_compile_cache()
     from mjx_protamer.experiments import metrics
     from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
 

@@ -72,8 +72,6 @@ def test_resume_is_exact(learned_run, tmp_path):
 
 
 def test_eval_command_reproduces_final_metrics(learned_run, capsys):
-    from mjx_protamer.cli import build_parser  # noqa: F401  (the CLI imports every command module)
-
     import argparse
 
     from mjx_protamer.commands import train as train_cmd
@@ -118,3 +116,17 @@ def test_train_vmaps_over_seeds():
     assert np.asarray(states.iteration).tolist() == [config.train.iterations] * 2
     # The replay holds every step of every env (no overflow at this size).
     assert np.asarray(states.replay.size).tolist() == [config.train.iterations * config.train.num_envs] * 2
+
+
+def test_checkpoint_roundtrip_keeps_zero_size_leaves(tmp_path):
+    """mjx.Data carries zero-size arrays (e.g. `act`), which orbax refuses: they are rebuilt on restore."""
+    from mjx_protamer.experiments import checkpoints
+
+    tree = {"a": jnp.arange(3.0), "empty": jnp.zeros((0, 4)), "n": {"k": jnp.ones((2, 2), jnp.int32)}}
+    mngr = checkpoints.manager(tmp_path / "ck")
+    checkpoints.save(mngr, 7, tree)
+    assert mngr.latest_step() == 7
+    back = checkpoints.restore(mngr, 7, jax.eval_shape(lambda: tree))
+    assert back["empty"].shape == (0, 4)
+    np.testing.assert_array_equal(back["a"], tree["a"])
+    assert back["n"]["k"].dtype == jnp.int32
