@@ -47,7 +47,9 @@ class TouchConfig:
         check(0.001 <= self.spacing_hand <= 0.03, "spacing_hand", f"must be in [0.001, 0.03] m, got {self.spacing_hand}")
         check(0.001 <= self.spacing_fingers <= 0.03, "spacing_fingers",
               f"must be in [0.001, 0.03] m, got {self.spacing_fingers}")
-        check(0.5 <= self.spread_factor <= 5, "spread_factor", f"must be in [0.5, 5], got {self.spread_factor}")
+        # Below one spacing a contact between sensors could reach none of them and its force be lost.
+        check(1.0 <= self.spread_factor <= 5, "spread_factor",
+              f"must be in [1, 5] sensor spacings, got {self.spread_factor}")
 
 
 @dataclasses.dataclass(frozen=True)

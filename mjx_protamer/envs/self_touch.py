@@ -39,20 +39,25 @@ class SelfTouchEnv:
                       qacc_warmstart=jnp.asarray(self.model.init_warmstart, jnp.float32))
         self.init_data = jax.jit(mjx.forward)(self.mjx_model, d)
         # Contact slots are grouped by condim in MJX; each slot's dimension is fixed by the model.
+        # Only the self-contact group's slots can touch a hand (when the floor has its own condim).
         contact = self.init_data._impl.contact
         dim = np.asarray(contact.dim)
-        self._n_pyramid = np.where(dim == 1, 1, 2 * (dim - 1))
+        phys = self.config.physics
+        self._self_slots = (np.arange(len(dim)) if phys.self_condim == phys.floor_condim
+                            else np.where(dim == phys.self_condim)[0])
+        self._n_pyramid = np.where(dim == 1, 1, 2 * (dim - 1))[self._self_slots]
 
     # --- contacts and sensing -------------------------------------------------------------------
     def contacts(self, d: mjx.Data):
-        """MJX contact slots as (geom pairs, positions, penetration, normal force)."""
-        c = d._impl.contact
+        """MJX contact slots that can be self-contacts, as (geom pairs, positions, depth, normal force)."""
+        c, slots = d._impl.contact, self._self_slots
+        efc_address = jnp.asarray(c.efc_address)[slots]
         efc_force = d._impl.efc_force
         offsets = jnp.arange(4)
-        rows = jnp.clip(c.efc_address[:, None] + offsets[None, :], 0, efc_force.shape[0] - 1)
+        rows = jnp.clip(efc_address[:, None] + offsets[None, :], 0, efc_force.shape[0] - 1)
         used = offsets[None, :] < jnp.asarray(self._n_pyramid)[:, None]
-        normal = jnp.sum(efc_force[rows] * used, axis=1) * (c.efc_address >= 0)
-        return c.geom, c.pos, c.dist, normal
+        normal = jnp.sum(efc_force[rows] * used, axis=1) * (efc_address >= 0)
+        return c.geom[slots], c.pos[slots], c.dist[slots], normal
 
     def sense(self, d: mjx.Data):
         """Touch features, main region mask (8,) and extended region mask (4,) of a forwarded state."""
@@ -99,12 +104,19 @@ class SelfTouchEnv:
             raise ValueError(f"action must have shape ({self.action_size},) per env, got {action.shape}")
         ctrl = self.model.action_to_ctrl(jnp, action).astype(jnp.float32)
         d = mjx.step(self.mjx_model, state.data.replace(ctrl=ctrl))
-        # A diverged state would poison a batch: restore the settled start and end the episode.
+        # A diverged env must not poison the batch: its outputs are zeroed, its integrated state is
+        # restored to the settled start (the rest of mjx.Data is recomputed from it by the next
+        # step) and the episode ends, so an auto-reset wrapper starts it afresh.
         bad = ~(jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel)))
-        d = jax.tree.map(lambda init, x: jnp.where(bad, init, x), self.init_data, d)
         touch, regions, extended = self.sense(d)
         obs, reward, metrics = self._transition(d, touch, regions, extended, state.info["prev_touch"],
                                                 state.info["prev_regions"], action)
+        init = self.init_data
+        d = d.replace(**{f: jnp.where(bad, getattr(init, f), getattr(d, f))
+                         for f in ("qpos", "qvel", "act", "qacc_warmstart")})
+        obs, reward, touch = (jnp.where(bad, 0.0, x) for x in (obs, reward, touch))
+        metrics = {k: jnp.where(bad, 0.0, v) for k, v in metrics.items()}
+        regions = regions & ~bad
         metrics["nan_reset"] = bad.astype(jnp.float32)
         info = dict(state.info, prev_touch=touch, prev_regions=regions)
         return state.replace(data=d, obs=obs, reward=reward, done=bad.astype(jnp.float32), metrics=metrics,

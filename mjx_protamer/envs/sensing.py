@@ -1,8 +1,8 @@
 """Touch features and body regions from a list of contacts, written once for NumPy and JAX.
 
-`xp` is `numpy` (the native-MuJoCo twin, float64) or `jax.numpy` (the MJX env, float32); the few
-operations the two spell differently (top-k, scatter-add) go through `Ops`. Inputs are contact
-arrays as both simulators give them: geom pairs, world positions, penetration and normal force.
+`xp` is `numpy` (the native-MuJoCo twin, float64) or `jax.numpy` (the MJX env, float32); the one
+operation the two spell differently (top-k) goes through `nearest_k`. Inputs are contact arrays as
+both simulators give them: geom pairs, world positions, penetration and normal force.
 
 Per hand geom (left palm, left fingers, right palm, right fingers) the feature is
 [contact position relative to the geom (3), forces of the k sensors nearest the contact (k)],
@@ -24,23 +24,13 @@ N_REGIONS = len(body.REGIONS)
 N_EXTENDED = len(body.EXTENDED_REGIONS)
 
 
-@dataclasses.dataclass(frozen=True)
-class Ops:
-    xp: Any
+def nearest_k(xp, d, k: int):
+    """Indices of the k smallest entries along the last axis, nearest first (ties: lower index)."""
+    if xp is np:
+        return np.argsort(d, axis=-1, kind="stable")[..., :k]
+    import jax
 
-    def nearest_k(self, d, k: int):
-        if self.xp is np:
-            return np.argsort(d, axis=-1, kind="stable")[..., :k]
-        import jax
-
-        return jax.lax.top_k(-d, k)[1]
-
-    def scatter_add(self, target, index, values):
-        if self.xp is np:
-            out = target.copy()
-            np.add.at(out, index, values)
-            return out
-        return target.at[index].add(values)
+    return jax.lax.top_k(-d, k)[1]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,7 +45,7 @@ class SensingTables:
     def as_xp(self, xp) -> dict[str, Any]:
         t = self.touch
         return {
-            "sensors": xp.asarray(t.sensors), "candidates": xp.asarray(t.candidates),
+            "candidates": xp.asarray(t.candidates), "candidate_pos": xp.asarray(np.moveaxis(t.sensors[t.candidates], -1, 1)),
             "grid_origin": xp.asarray(t.grid_origin), "grid_cell": xp.asarray(t.grid_cell),
             "grid_dims": xp.asarray(t.grid_dims), "grid_offset": xp.asarray(t.grid_offset),
             "spread_radius": xp.asarray(t.spread_radius), "radius": xp.asarray(t.radius),
@@ -84,8 +74,6 @@ def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geo
     geom (n, 2) int, pos (n, 3), dist (n,), normal_force (n,): the contacts (inactive ones allowed:
     dist >= 0 ignores them). geom_xpos (ngeom, 3), geom_xmat (ngeom, 3, 3): geom frames.
     """
-    ops = Ops(xp)
-    n_sensors = tables["sensors"].shape[0] - 1
     # Each contact is seen from both of its geoms: a palm touching the other palm touches both hands.
     own = xp.concatenate([geom[:, 0], geom[:, 1]])
     other = xp.concatenate([geom[:, 1], geom[:, 0]])
@@ -104,25 +92,30 @@ def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geo
     p_local = xp.einsum("ni,nij->nj", rel, geom_xmat[own])
     q = project_to_surface(xp, p_local, tables["half_length"][hand_i], tables["radius"][hand_i])
 
-    # Candidate sensors from the voxel grid of the hand geom.
+    # Candidate sensors from the voxel grid of the hand geom: one row of positions each (padding is a
+    # far-away dummy sensor that never gets weight).
     cell = tables["grid_cell"][hand_i][:, None]
     dims = tables["grid_dims"][hand_i]
     ijk = xp.floor((q - tables["grid_origin"][hand_i]) / cell).astype(dims.dtype)
     ijk = xp.clip(ijk, 0, dims - 1)
     voxel = tables["grid_offset"][hand_i] + (ijk[:, 0] * dims[:, 1] + ijk[:, 1]) * dims[:, 2] + ijk[:, 2]
-    cand = tables["candidates"][voxel]  # (2n, C)
-    d = xp.sqrt(xp.sum((tables["sensors"][cand] - q[:, None, :]) ** 2, axis=-1))  # (2n, C)
-    nearest = ops.nearest_k(d, k)  # (2n, k), nearest first
-    ids = xp.take_along_axis(cand, nearest, axis=1)
+    # Positions are component-major, (E, 3, C): XLA's CPU loops vectorise over C, not over xyz.
+    cand_pos = tables["candidate_pos"][voxel]
+    d = xp.sqrt(sum((cand_pos[:, a, :] - q[:, a, None]) ** 2 for a in range(3)))  # (E, C)
+    nearest = nearest_k(xp, d, k)  # (E, k), nearest first
+    near_pos = [xp.take_along_axis(cand_pos[:, a, :], nearest, axis=1) for a in range(3)]  # 3 x (E, k)
 
-    # Spread each contact's normal force over the sensors within the radius, conserving its sum.
-    w = xp.clip(1.0 - d / tables["spread_radius"][hand_i][:, None], 0.0, None) * (cand < n_sensors)
-    w_sum = xp.sum(w, axis=1, keepdims=True)
-    nearest_onehot = (xp.arange(cand.shape[1])[None, :] == nearest[:, :1]).astype(w.dtype)
-    w = xp.where(w_sum > 0, w / xp.where(w_sum > 0, w_sum, 1.0), nearest_onehot)
-    contribution = (force * valid)[:, None] * w
-    field = ops.scatter_add(xp.zeros(n_sensors + 1, dtype=w.dtype), cand.reshape(-1), contribution.reshape(-1))
-    readings = field[ids]  # (2n, k)
+    # Each contact's normal force is spread over the sensors within the radius with a linear
+    # fall-off, normalised so the sensors' forces sum to the contact's force. A sensor's reading is
+    # the sum over all contacts on its geom. Contacts are few, so the sum is computed densely
+    # between contacts (E x k x E) rather than scattered into the ~1,200-sensor field.
+    radius = tables["spread_radius"][hand_i]  # (E,)
+    w_sum = xp.sum(xp.clip(1.0 - d / radius[:, None], 0.0, None), axis=1)  # (E,)
+    scale = xp.where(valid & (w_sum > 0), force / xp.where(w_sum > 0, w_sum, 1.0), 0.0)  # (E,)
+    gap = xp.sqrt(sum((near_pos[a][:, :, None] - q[None, None, :, a]) ** 2 for a in range(3)))  # (E, k, E')
+    w_pair = xp.clip(1.0 - gap / radius[None, None, :], 0.0, None)
+    same_geom = (hand_i[:, None] == hand_i[None, :]).astype(w_pair.dtype)  # (E, E')
+    readings = xp.einsum("ejf,ef,f->ej", w_pair, same_geom, scale)  # (E, k)
 
     features = xp.concatenate([p_local, readings], axis=1) * valid[:, None]
     onehot = (hand_i[:, None] == xp.arange(4)[None, :]) & valid[:, None]  # (2n, 4)

@@ -85,6 +85,8 @@ class TouchTables:
                 nearest = set(own[np.argsort(d_all)[: self.k]])
                 within = set(own[d_all < self.spread_radius[h]])
                 missing = (nearest | within) - set(cand.tolist())
+                if d_all.min() >= self.spread_radius[h]:
+                    raise AssertionError(f"hand geom {h}: no sensor within the spread radius of {p}")
                 if missing:
                     raise AssertionError(f"hand geom {h}: candidates miss sensors {sorted(missing)[:5]} at {p}")
 
