@@ -1,0 +1,51 @@
+"""`protamer bench env|train|voice [--json]`: speed benchmarks that print their figures.
+
+Each benchmark lives with what it measures (experiments/bench_env.py, experiments/bench_train.py,
+audio_frontend/bench.py); this module only wires them to the command line and prints the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+
+# name -> (module, function that returns the JSON-able result)
+BENCHMARKS = {
+    "env": ("mjx_protamer.experiments.bench_env", "run_env_benchmark",
+            "MJX env steps/s at several batch sizes vs MJX physics, native MuJoCo and the NumPy twin"),
+    "train": ("mjx_protamer.experiments.bench_train", "run_train_benchmark",
+              "DDPG training steps/s (single env, batched) vs Stable-Baselines3 on the twin"),
+    "voice": ("audio_frontend.bench", "run_voice_benchmark",
+              "latency from end of utterance to feedback event, prosody and Whisper"),
+}
+
+
+def _print_table(result: dict, prefix: str = "") -> None:
+    for key, value in result.items():
+        if isinstance(value, dict):
+            _print_table(value, prefix + key + ".")
+        else:
+            print(f"{prefix + key:48s} {value}")
+
+
+def _run(args: argparse.Namespace) -> int:
+    module, func, _ = BENCHMARKS[args.benchmark]
+    result = getattr(importlib.import_module(module), func)(args)
+    if args.json:
+        print(json.dumps(result, indent=2, sort_keys=True))
+    else:
+        _print_table(result)
+    return 0
+
+
+def register(sub) -> None:
+    parser = sub.add_parser("bench", help="speed benchmarks (printed as a table or JSON)")
+    benches = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
+    benches.required = True
+    for name, (module, _, help_text) in BENCHMARKS.items():
+        p = benches.add_parser(name, help=help_text)
+        p.add_argument("--json", action="store_true", help="print one JSON object")
+        # Argument definitions are light (no JAX/torch at import) in each benchmark module.
+        importlib.import_module(module).add_arguments(p)
+        p.set_defaults(handler=_run)
