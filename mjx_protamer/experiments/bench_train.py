@@ -66,31 +66,24 @@ def _time_jax(env, config, repeats: int) -> dict:
     return {"median": statistics.median(rates), "runs": rates, "compile_s": compile_s}
 
 
-def _make_twin(env_name: str, episode_length: int):
-    if env_name == "toy":
+def _make_twin(config):
+    """The NumPy/Gymnasium twin of the env the JAX side trains on (same env config)."""
+    if config.env_name == "toy":
         from mjx_protamer.envs.toy_twin import PointReachGym
 
-        return PointReachGym(episode_length=episode_length)
-    import gymnasium as gym
+        return PointReachGym(config.toy, episode_length=config.train.episode_length)
+    from mjx_protamer.envs.twin import SelfTouchTwinEnv
 
-    from mjx_protamer.envs import twin
-
-    for name in ("make_gym_env", "make_env", "make"):
-        if hasattr(twin, name):
-            return getattr(twin, name)()
-    for value in vars(twin).values():
-        if isinstance(value, type) and issubclass(value, gym.Env) and value.__module__ == twin.__name__:
-            return gym.wrappers.TimeLimit(value(), max_episode_steps=episode_length)
-    raise RuntimeError("mjx_protamer.envs.twin has no Gymnasium env to benchmark")
+    return SelfTouchTwinEnv(config.env)  # truncates at env.episode_length itself
 
 
-def _time_sb3(env_name: str, episode_length: int, steps: int, repeats: int) -> dict:
+def _time_sb3(config, steps: int, repeats: int) -> dict:
     import numpy as np
     import torch
     from stable_baselines3 import DDPG
     from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 
-    env = _make_twin(env_name, episode_length)
+    env = _make_twin(config)
     act = env.action_space.shape[0]
     noise = OrnsteinUhlenbeckActionNoise(mean=np.zeros(act), sigma=0.6 * np.ones(act), theta=0.15, dt=1.0)
     model = DDPG(
@@ -105,7 +98,7 @@ def _time_sb3(env_name: str, episode_length: int, steps: int, repeats: int) -> d
         model.learn(total_timesteps=steps, reset_num_timesteps=False)
         rates.append(steps / (time.perf_counter() - t))
     return {"median": statistics.median(rates), "runs": rates, "torch_threads": torch.get_num_threads(),
-            "env": type(getattr(env, "unwrapped", env)).__module__ + "." + type(getattr(env, "unwrapped", env)).__name__}
+            "env": f"{type(env).__module__}.{type(env).__name__}"}
 
 
 def run_train_benchmark(args: argparse.Namespace) -> dict:
@@ -135,7 +128,7 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
         "machine": platform.processor() or platform.machine(),
     }
     if not args.skip_sb3:
-        sb3 = _time_sb3(args.env, single.train.episode_length, args.sb3_steps, args.repeats)
+        sb3 = _time_sb3(single, args.sb3_steps, args.repeats)
         result.update(sb3_steps_per_s=sb3["median"], sb3_runs=sb3["runs"], sb3_torch_threads=sb3["torch_threads"],
                       sb3_env=sb3["env"], ratio_vs_sb3=jax_single["median"] / sb3["median"])
     else:

@@ -68,6 +68,7 @@ def run_pretrain(
                    dynamic_ncols=True, desc="pretrain")
     t_start = time.perf_counter()
     timed_steps, timed_s = 0, 0.0
+    last_return = float("nan")  # the progress bar shows the latest finished episodes' return
     chunk = start
     for chunk in range(start + 1, tc.num_chunks + 1):
         if max_chunks is not None and chunk - start > max_chunks:
@@ -87,7 +88,9 @@ def run_pretrain(
             checkpoints.save(mngr, chunk, state)
         if bar is not None:
             bar.update(steps_per_chunk)
-            bar.set_postfix(sps=f"{steps_per_chunk / dt:.0f}", ret=f"{row['episode_return']:.1f}",
+            if row["episode_return"] == row["episode_return"]:
+                last_return = row["episode_return"]
+            bar.set_postfix(sps=f"{steps_per_chunk / dt:.0f}", ret=f"{last_return:.1f}",
                             contact=f"{row['contact_rate']:.2f}")
     if bar is not None:
         bar.close()
