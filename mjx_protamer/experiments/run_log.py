@@ -76,19 +76,20 @@ class RunLog:
 
 
 def plot_curve(rows: list[dict], path: str | Path) -> Path:
-    """Episode return and contact rate against env steps, as a PNG."""
+    """Reward per step, episode return and contact rate against env steps, as a PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     steps = [r["env_steps"] for r in rows]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5))
-    axes[0].plot(steps, [r["episode_return"] for r in rows], marker=".")
-    axes[0].set_ylabel("episode return")
-    axes[1].plot(steps, [r["contact_rate"] for r in rows], marker=".", color="tab:orange")
-    axes[1].set_ylabel("self-contact rate")
-    for ax in axes:
+    panels = [("step_reward", "reward per env step", "tab:blue"),
+              ("episode_return", "episode return (finished episodes)", "tab:green"),
+              ("contact_rate", "self-contact rate", "tab:orange")]
+    fig, axes = plt.subplots(1, len(panels), figsize=(14, 3.5))
+    for ax, (key, label, color) in zip(axes, panels):
+        ax.plot(steps, [r.get(key, float("nan")) for r in rows], marker=".", color=color)
+        ax.set_ylabel(label)
         ax.set_xlabel("env steps")
         ax.grid(alpha=0.3)
     fig.tight_layout()
