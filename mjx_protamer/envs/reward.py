@@ -16,8 +16,9 @@ def reward_terms(xp, cfg: RewardConfig, touch, prev_touch, regions, prev_regions
     # New regions: the touched set is not a subset of the previous step's set.
     new_region = xp.any(regions & ~prev_regions)
     region = xp.where(new_region, cfg.region_new, cfg.region_stale)
-    movement = cfg.movement_penalty * ((arm_speed < cfg.speed_low).astype(touch.dtype)
-                                       + (arm_speed > cfg.speed_high).astype(touch.dtype))
+    arm_speed = xp.asarray(arm_speed)
+    movement = cfg.movement_penalty * (xp.asarray(arm_speed < cfg.speed_low, dtype=touch.dtype)
+                                       + xp.asarray(arm_speed > cfg.speed_high, dtype=touch.dtype))
     energy = -cfg.energy_coef * xp.sum(torque**2)
     joint_limit = -cfg.limit_coef * xp.sum(xp.clip(xp.abs(action) - cfg.limit_threshold, 0.0, 1.0))
     return xp.stack([xp.asarray(t, dtype=touch.dtype) for t in

@@ -1,0 +1,224 @@
+"""The self-touch env's parts: touch tables, sensing rules, reward terms, config errors, wrappers.
+
+NumPy tests first (no compile); the JAX part shares one compiled batched step (B = 2).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mjx_protamer.config import ConfigError, load_config
+from mjx_protamer.envs import body
+from mjx_protamer.envs.config import EnvConfig, RewardConfig
+from mjx_protamer.envs.model import build_model
+from mjx_protamer.envs.reward import reward_terms
+from mjx_protamer.envs.sensing import sense
+from mjx_protamer.envs.touch import build_touch_tables
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build_model(EnvConfig())
+
+
+@pytest.fixture(scope="module")
+def np_tables(model):
+    return model.sensing.as_xp(np)
+
+
+def _gid(model, name):
+    import mujoco
+
+    return mujoco.mj_name2id(model.mj_model, mujoco.mjtObj.mjOBJ_GEOM, name)
+
+
+def _identity_frames(model):
+    ngeom = model.mj_model.ngeom
+    return np.zeros((ngeom, 3)), np.tile(np.eye(3), (ngeom, 1, 1))
+
+
+@pytest.mark.parametrize("k", [10, 4])
+def test_candidate_tables_hold_exact_nearest_and_spread_sensors(k):
+    tables = build_touch_tables(k=k)
+    tables.check_candidates(np.random.default_rng(k), n_points=400)
+
+
+def test_sensor_counts_follow_the_spec_spacing():
+    t = build_touch_tables()
+    palm = (t.sensor_geom == 0).sum()
+    fingers = (t.sensor_geom == 1).sum()
+    palm_area = 4 * math.pi * body.PALM_R**2
+    finger_area = 2 * math.pi * body.FINGER_R * 2 * body.FINGER_HALF + 4 * math.pi * body.FINGER_R**2
+    assert palm == pytest.approx(palm_area / 0.007**2, rel=0.1)
+    assert fingers == pytest.approx(finger_area / 0.002**2, rel=0.15)
+
+
+def _one_contact(model, hand, other, local_point, force, depth=-1e-3):
+    geom = np.array([[_gid(model, hand), _gid(model, other)]])
+    xpos, xmat = _identity_frames(model)
+    return geom, np.array([local_point]), np.array([depth]), np.array([force]), xpos, xmat
+
+
+def test_single_contact_conserves_normal_force_and_reports_position(model, np_tables):
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        direction = rng.normal(size=3)
+        point = body.PALM_R * direction / np.linalg.norm(direction)
+        touch, regions, extended = sense(np, np_tables, 10, *_one_contact(model, "left_palm", "head", point, 2.5))
+        palm = touch[0:13]
+        np.testing.assert_allclose(palm[:3], point, atol=1e-12)
+        # The spread ball (1.5 spacings) holds fewer sensors than the k = 10 nearest: all force is read.
+        assert palm[3:].sum() == pytest.approx(2.5, rel=1e-9)
+        assert np.all(np.diff(palm[3:]) <= 1e-12) or palm[3] > 0  # nearest sensor first and loaded
+        assert np.all(touch[13:] == 0), "only the left palm touched"
+        assert regions.tolist() == [r == "head" for r in body.REGIONS]
+        assert not extended.any()
+
+
+def test_multiple_contacts_are_averaged_and_floor_is_ignored(model, np_tables):
+    a = np.array([0.0, 0.0, body.FINGER_HALF + body.FINGER_R])  # tip of the finger capsule
+    b = np.array([body.FINGER_R, 0.0, 0.0])  # its side
+    geom = np.array([[_gid(model, "right_fingers"), _gid(model, "upper_body")],
+                     [_gid(model, "hip"), _gid(model, "right_fingers")],
+                     [_gid(model, "floor"), _gid(model, "right_fingers")]])
+    xpos, xmat = _identity_frames(model)
+    touch, regions, _ = sense(np, np_tables, 10, geom, np.stack([a, b, a]), np.array([-1e-3, -1e-3, -1e-3]),
+                              np.array([1.0, 3.0, 50.0]), xpos, xmat)
+    fingers = touch[39:52]
+    np.testing.assert_allclose(fingers[:3], (a + b) / 2, atol=1e-12)
+    # The two contacts are far apart: each one's k readings hold its own force; the mean is (1+3)/2.
+    assert fingers[3:].sum() == pytest.approx(2.0, rel=1e-9)
+    assert set(np.array(body.REGIONS)[regions]) == {"upper_body", "hip"}
+
+
+def test_inactive_contacts_and_no_contact_give_zeros(model, np_tables):
+    touch, regions, extended = sense(np, np_tables, 10, *_one_contact(model, "left_palm", "head",
+                                                                          [body.PALM_R, 0, 0], 1.0, depth=+1e-3))
+    assert not touch.any() and not regions.any() and not extended.any()
+
+
+def test_own_lower_arm_is_not_a_self_contact_but_other_arm_is(model, np_tables):
+    _, regions, _ = sense(np, np_tables, 10, *_one_contact(model, "left_fingers", "left_lower_arm",
+                                                            [body.FINGER_R, 0, 0], 1.0))
+    assert not regions.any()
+    _, regions, _ = sense(np, np_tables, 10, *_one_contact(model, "left_fingers", "right_lower_arm",
+                                                            [body.FINGER_R, 0, 0], 1.0))
+    assert np.array(body.REGIONS)[regions].tolist() == ["right_lower_arm"]
+
+
+def test_hand_to_hand_contact_touches_both_hands(model, np_tables):
+    touch, regions, extended = sense(np, np_tables, 10, *_one_contact(model, "left_palm", "right_palm",
+                                                                          [body.PALM_R, 0, 0], 1.0))
+    assert not regions.any(), "the other hand is an extended region, not one of the 8"
+    assert extended.tolist() == [True, True, False, False]
+    assert touch[0:13].any() and touch[26:39].any()
+
+
+def test_reward_terms_match_hand_computed_values():
+    cfg = RewardConfig()
+    touch = np.array([0.5, -1.5, 2.0])
+    prev = np.array([0.5, 0.5, 0.0])
+    regions = np.array([True, False, True])
+    torque = np.array([1.0, -2.0])
+    action = np.array([0.9, -1.0, 0.5])
+    terms = reward_terms(np, cfg, touch, prev, regions, np.array([True, False, False]), 2.0, torque, action)
+    expected = [4 * math.tanh(0.05 * 4.0), math.sqrt(0 + 4 + 4), 0.3, 0.0, -0.001 * 5, -0.8 * (0.1 + 0.2)]
+    np.testing.assert_allclose(terms, expected, rtol=1e-12)
+    # Same regions as before (a subset): -1; too slow and too fast: -0.5 each.
+    stale = reward_terms(np, cfg, touch, prev, regions, regions, 0.5, torque, action)
+    assert stale[2] == -1.0 and stale[3] == -0.5
+    assert reward_terms(np, cfg, touch, prev, regions, regions, 3.5, torque, action)[3] == -0.5
+
+
+def test_config_errors_name_the_field(tmp_path):
+    with pytest.raises(ConfigError, match="k"):
+        load_config(EnvConfig, None, ["k=0"])
+    with pytest.raises(ConfigError, match="unknown config key.*physics.iteratons"):
+        load_config(EnvConfig, None, ["physics.iteratons=3"])
+    with pytest.raises(ConfigError, match="qpos_joints.*left_knee"):
+        load_config(EnvConfig, None, ["qpos_joints=[left_knee]"])
+    with pytest.raises(ConfigError, match="reward.speed_low"):
+        load_config(EnvConfig, None, ["reward.speed_low=5"])
+    with pytest.raises(ConfigError, match="physics.self_condim.*1 or 3"):
+        load_config(EnvConfig, None, ["physics.self_condim=2"])
+    path = tmp_path / "env.yaml"
+    path.write_text("k: 6\nreward:\n  energy: 0.0\n")
+    cfg = load_config(EnvConfig, path)
+    assert cfg.k == 6 and cfg.observation_size == 4 * 9 + 32 and cfg.reward.weights()[4] == 0.0
+
+
+def test_body_model_facts(model):
+    m = model.mj_model
+    assert m.nu == 14 and m.npair == 48
+    assert all(m.geom_contype == 0) and all(m.geom_conaffinity == 0), "only explicit pairs collide"
+    # Primitives MJX collides cheaply only: plane, sphere, capsule.
+    import mujoco
+
+    allowed = {mujoco.mjtGeom.mjGEOM_PLANE, mujoco.mjtGeom.mjGEOM_SPHERE, mujoco.mjtGeom.mjGEOM_CAPSULE}
+    assert set(m.geom_type.tolist()) <= {int(t) for t in allowed}
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i) for i in range(m.nu)]
+    assert tuple(names) == body.ACTUATED_JOINTS
+    # The settled start is at rest.
+    assert np.abs(model.init_qvel).max() < 0.05
+
+
+# --- JAX: one compiled batched step shared by the tests below ----------------------------------------
+
+@pytest.fixture(scope="module")
+def batched():
+    import jax
+
+    from mjx_protamer.envs.self_touch import SelfTouchEnv
+    from mjx_protamer.envs.wrappers import wrap_for_training
+
+    env = SelfTouchEnv()
+    benv = wrap_for_training(env, episode_length=3)
+    return env, benv, jax.jit(benv.reset), jax.jit(benv.step)
+
+
+def test_nan_state_resets_that_env_only_and_is_counted(batched):
+    import jax
+    import jax.numpy as jnp
+
+    env, _, reset, step = batched
+    state = reset(jax.random.split(jax.random.PRNGKey(0), 2))
+    poisoned = state.data.replace(qvel=state.data.qvel.at[1].set(jnp.nan))
+    state = state.replace(data=poisoned)
+    actions = jnp.zeros((2, 14))
+    nstate = step(state, actions)
+    assert nstate.metrics["nan_reset"].tolist() == [0.0, 1.0]
+    assert nstate.done.tolist() == [0.0, 1.0]
+    assert np.isfinite(np.asarray(nstate.obs)).all() and np.isfinite(np.asarray(nstate.info["final_obs"])).all()
+    assert np.isfinite(np.asarray(nstate.data.qpos)).all()
+    assert int(nstate.info["episodes"][1]) == 1 and int(nstate.info["episodes"][0]) == 0
+    assert bool(jnp.isfinite(nstate.reward).all())
+
+
+def test_episode_limit_truncates_and_auto_resets(batched):
+    import jax
+    import jax.numpy as jnp
+
+    env, _, reset, step = batched
+    state = reset(jax.random.split(jax.random.PRNGKey(1), 2))
+    assert state.obs.shape == (2, env.observation_size) == (2, 84)
+    actions = jnp.ones((2, 14)) * 0.3
+    for t in range(3):
+        state = step(state, actions)
+    assert state.done.tolist() == [1.0, 1.0] and state.info["truncation"].tolist() == [1.0, 1.0]
+    assert state.info["steps"].tolist() == [0, 0], "steps restart after the reset"
+    assert not np.allclose(np.asarray(state.obs), np.asarray(state.info["final_obs"])), "obs is the reset obs"
+    # Different reset keys per env: the two fresh starts differ.
+    assert not np.allclose(np.asarray(state.data.qpos[0]), np.asarray(state.data.qpos[1]))
+
+
+def test_wrong_action_shape_is_refused(batched):
+    import jax
+    import jax.numpy as jnp
+
+    env, _, reset, _ = batched
+    single = jax.tree.map(lambda x: x[0], reset(jax.random.split(jax.random.PRNGKey(0), 2)))
+    with pytest.raises(ValueError, match=r"action must have shape \(14,\)"):
+        env.step(single, jnp.zeros(13))
