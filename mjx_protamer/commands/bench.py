@@ -16,6 +16,8 @@ BENCHMARKS = {
             "MJX env steps/s at several batch sizes vs MJX physics, native MuJoCo and the NumPy twin"),
     "train": ("mjx_protamer.experiments.bench_train", "run_train_benchmark",
               "DDPG training steps/s (single env, batched) vs Stable-Baselines3 on the twin"),
+    "tracking": ("mjx_protamer.experiments.tracking", "run_tracking_benchmark",
+                 "position-servo tracking error on held random targets (free space and blocked)"),
     "voice": ("audio_frontend.bench", "run_voice_benchmark",
               "latency from end of utterance to feedback event, prosody and Whisper"),
 }
