@@ -16,8 +16,9 @@ Making the comparison fair (and what it leaves out, on purpose):
 - Contact sets: MJX keeps the deepest `max_contact_points` (8) contacts per condim group, native keeps
   all; native capsule-capsule may emit 2 contacts for near-parallel capsules, MJX 1; a contact at
   penetration ~0 can be active in one precision and not the other. A state is compared only when both
-  sides have the same multiset of active (dist < 0) contact geom pairs; the test requires that this holds
-  for nearly all states (it held for every held-target state when written) and reports the rest.
+  sides have the same multiset of active (dist < 0) self-contact geom pairs (hand vs body); the test
+  requires that this holds for nearly all states (it held for every held-target state when written) and
+  reports the rest.
 
 Tolerances (same state, converged solver; measured maxima when written in brackets):
 - s_qpos, s_qvel: 1e-5 abs + 1e-5 rel (float32 rounding) [1.2e-7, 1.7e-6];
@@ -85,8 +86,12 @@ def sweep(eq_twin):
     return {"held": held, "all_four": all_four, "random": _random_states(eq_twin)}
 
 
-def _pairs(geom, dist):
-    return sorted(tuple(sorted(map(int, g))) for g, x in zip(geom, dist) if x < 0)
+def _pairs(geom, dist, tables):
+    """Active self-contacts (a hand geom against a body-region geom; the floor excluded): the only
+    contacts sensing reads and the only ones the MJX env reports, as a sorted multiset."""
+    hand, region = tables.geom_hand, tables.geom_region
+    return sorted(tuple(sorted(map(int, g))) for g, x in zip(geom, dist)
+                  if x < 0 and (hand[g[0]] >= 0 or hand[g[1]] >= 0) and region[g[0]] >= 0 and region[g[1]] >= 0)
 
 
 def _compare(twin, mjx_eval, states):
@@ -105,7 +110,8 @@ def _compare(twin, mjx_eval, states):
         mx = mjx_eval(qpos, qvel, ctrl, ws, pm[0], pm[1], action)
         prev_n = (nat["touch"], nat["region_mask"])
         prev_m = (mx["touch"], mx["region_mask"])
-        if _pairs(ng, ndist) != _pairs(mx["geom"], mx["dist"]):
+        tables = twin.model.sensing
+        if _pairs(ng, ndist, tables) != _pairs(mx["geom"], mx["dist"], tables):
             skipped += 1
             prev_n = prev_m = None  # the next state's novelty/region terms need equal previous states
             continue
