@@ -64,5 +64,11 @@ def test_paper_single_env_is_the_paper_setting():
 
 
 def test_chunk_rounding():
-    c = load_config(PretrainConfig, None, ["train.num_envs=3", "train.total_env_steps=1000", "train.chunk_steps=100"])
+    c = load_config(PretrainConfig, None, ["train.num_envs=3", "train.total_env_steps=1000", "train.chunk_steps=100",
+                                           "train.warmup_env_steps=100"])
     assert c.train.iterations == 400 and c.train.num_chunks == 4
+
+
+def test_builtin_default_is_configs_pretrain_yaml():
+    """`protamer pretrain` without --config (a fresh install has no configs/) runs the batched default."""
+    assert load_config(PretrainConfig) == load_config(PretrainConfig, CONFIGS / "pretrain.yaml")

@@ -61,14 +61,17 @@ class DDPGConfig:
 
 @dataclass(frozen=True)
 class TrainConfig:
+    """Defaults: the batched pretraining default (configs/pretrain.yaml); the paper's single-env setting is
+    configs/paper_single_env.yaml."""
+
     seed: int = 0
-    num_envs: int = 1
+    num_envs: int = 32
     episode_length: int = 1000
-    total_env_steps: int = 20_000  # over all envs; rounded up to whole chunks
-    warmup_env_steps: int = 1_000  # uniform random actions, no updates, before learning starts
+    total_env_steps: int = 64_000  # over all envs; rounded up to whole chunks
+    warmup_env_steps: int = 4_000  # uniform random actions, no updates, before learning starts
     updates_per_step: int = 1  # gradient updates per vectorised env step (one step of every env)
-    chunk_steps: int = 1_000  # vectorised env steps per jitted chunk; host work happens between chunks
-    checkpoint_every_chunks: int = 1
+    chunk_steps: int = 100  # vectorised env steps per jitted chunk; host work happens between chunks
+    checkpoint_every_chunks: int = 5
     num_devices: int = 0  # data-parallel devices to shard over; 0 = all of jax.devices()
     eval_episodes: int = 10
 
