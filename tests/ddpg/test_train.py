@@ -114,6 +114,8 @@ def test_train_vmaps_over_seeds():
     k = states.actor_params["params"]["Dense_0"]["kernel"]
     assert k.shape[0] == 2 and not np.allclose(k[0], k[1])
     assert np.asarray(states.iteration).tolist() == [config.train.iterations] * 2
+    # Staggered episode clocks: the envs of a batch do not reset in lockstep.
+    assert len(set(np.asarray(states.env_state.info["steps"])[0].tolist())) > 1
     # The replay holds every step of every env (no overflow at this size).
     assert np.asarray(states.replay.size).tolist() == [config.train.iterations * config.train.num_envs] * 2
 

@@ -70,6 +70,7 @@ class TrainConfig:
     total_env_steps: int = 64_000  # over all envs; rounded up to whole chunks
     warmup_env_steps: int = 4_000  # uniform random actions, no updates, before learning starts
     updates_per_step: int = 1  # gradient updates per vectorised env step (one step of every env)
+    stagger_episodes: bool = True  # random initial episode clocks, so a batch of envs does not reset in lockstep
     chunk_steps: int = 100  # vectorised env steps per jitted chunk; host work happens between chunks
     checkpoint_every_chunks: int = 5
     num_devices: int = 0  # data-parallel devices to shard over; 0 = all of jax.devices()

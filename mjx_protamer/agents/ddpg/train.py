@@ -140,10 +140,17 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         return jax.lax.psum(x, axis) if sharded else x
 
     def init(rng: jax.Array) -> TrainState:
-        k_actor, k_critic, k_env, k_run = jax.random.split(rng, 4)
+        k_actor, k_critic, k_env, k_stagger, k_run = jax.random.split(rng, 5)
         actor_params = actor.init(k_actor, jnp.zeros((obs_size,)))
         critic_params = critic.init(k_critic, jnp.zeros((obs_size,)), jnp.zeros((act_size,)))
         env_state = venv.reset(jax.random.split(local_key(k_env), local_envs))
+        if tc.stagger_episodes and tc.num_envs > 1:
+            # Start the envs' episode clocks at random points, so that the batch does not reset in lockstep
+            # and the replay holds every phase of an episode at all times (the first episodes are shorter:
+            # time-limit truncations, bootstrapped through).
+            steps = env_state.info["steps"]
+            offsets = jax.random.randint(local_key(k_stagger), steps.shape, 0, tc.episode_length)
+            env_state = env_state.replace(info=dict(env_state.info, steps=offsets.astype(steps.dtype)))
         return _strong(TrainState(
             actor_params=actor_params,
             critic_params=critic_params,
