@@ -53,11 +53,14 @@ def _enable_compile_cache() -> None:
 
 def _pretrain(args: argparse.Namespace) -> int:
     from mjx_protamer.agents.ddpg.config import PretrainConfig
-    from mjx_protamer.config import ConfigError, load_config
+    from mjx_protamer.config import ConfigError, apply_overrides, from_dict, load_config, to_dict
 
     if args.resume and args.out is None:
         raise ConfigError("--resume needs --out, the run directory to continue")
-    config = load_config(PretrainConfig, args.config, args.overrides)
+    if args.config is None:  # overrides apply on top of the whole built-in default, section by section
+        config = from_dict(PretrainConfig, apply_overrides(to_dict(PretrainConfig()), args.overrides))
+    else:
+        config = load_config(PretrainConfig, args.config, args.overrides)
     _enable_compile_cache()
     out = args.out or Path("runs") / time.strftime("pretrain-%Y%m%d-%H%M%S")
 

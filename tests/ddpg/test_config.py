@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from mjx_protamer.agents.ddpg.config import PretrainConfig
+from mjx_protamer.agents.ddpg.config import DDPGConfig, PretrainConfig
 from mjx_protamer.config import ConfigError, load_config
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -42,8 +42,7 @@ def test_unknown_key_is_named():
 
 
 def test_defaults_are_the_paper_reference():
-    c = load_config(PretrainConfig)
-    d = c.ddpg
+    d = DDPGConfig()
     assert (d.actor_hidden, d.critic_hidden) == ((400, 300), (400, 300))
     assert (d.actor_lr, d.critic_lr, d.gamma, d.tau, d.batch_size, d.replay_size) == (1e-3, 1e-3, 0.99, 0.001, 64, 100_000)
     assert (d.noise.kind, d.noise.theta, d.noise.sigma) == ("ou", 0.15, 0.6)
@@ -61,6 +60,7 @@ def test_paper_single_env_is_the_paper_setting():
     assert (t.num_envs, t.episode_length, t.updates_per_step) == (1, 1000, 1)
     assert t.total_env_steps == 20 * 1000
     assert c.env_name == "self_touch"
+    assert c.ddpg == DDPGConfig()
 
 
 def test_chunk_rounding():
