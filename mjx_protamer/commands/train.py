@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -80,9 +82,11 @@ def _eval(args: argparse.Namespace) -> int:
     from mjx_protamer.experiments import metrics
     from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
 
-    config, env, state, step = load_run(args.checkpoint)
-    seed = eval_seed(config) if args.seed is None else args.seed
-    summary = evaluate(config, env, state.actor_params, args.episodes, seed)
+    # Library chatter on stdout (mujoco.mjx prints "Failed to import warp") must not corrupt --json.
+    with contextlib.redirect_stdout(sys.stderr):
+        config, env, state, step = load_run(args.checkpoint)
+        seed = eval_seed(config) if args.seed is None else args.seed
+        summary = evaluate(config, env, state.actor_params, args.episodes, seed)
     summary["checkpoint_step"] = step
     if args.json:
         print(json.dumps(summary, indent=2))
