@@ -97,6 +97,8 @@ class EnvConfig:
     freeze_speed: float = 1.0
     reset_noise_steps: int = 10
     reset_noise_scale: float = 0.1
+    reset_pool_size: int = 256
+    reset_pool_seed: int = 0
     physics: PhysicsConfig = PhysicsConfig()
     touch: TouchConfig = TouchConfig()
     reward: RewardConfig = RewardConfig()
@@ -114,6 +116,7 @@ class EnvConfig:
         check(self.freeze_speed > 0, "freeze_speed", f"must be > 0 rad/s, got {self.freeze_speed}")
         check(0 <= self.reset_noise_steps <= 200, "reset_noise_steps", f"must be in [0, 200], got {self.reset_noise_steps}")
         check(0 <= self.reset_noise_scale <= 1, "reset_noise_scale", f"must be in [0, 1], got {self.reset_noise_scale}")
+        check(1 <= self.reset_pool_size <= 4096, "reset_pool_size", f"must be in [1, 4096], got {self.reset_pool_size}")
 
     @property
     def observation_size(self) -> int:

@@ -2,6 +2,12 @@
 
 Shared by the MJX env and the native-MuJoCo twin so both read the same joints, actuators and tables.
 Built once per configuration (cached): the touch tables take about two seconds.
+
+Episode starts: the spec's reset is "settle, then a few small random actions so starts differ". Doing
+that inside every reset would put `reset_noise_steps` physics steps into each reset, and with batched
+envs whose episodes end at different times a reset happens almost every step. So the starts are made
+once, natively: a pool of `reset_pool_size` states, each the settled pose followed by its own
+`reset_noise_steps` random targets (seeded by `reset_pool_seed`); a reset draws one of them.
 """
 
 from __future__ import annotations
@@ -35,6 +41,10 @@ class SelfTouchModel:
     init_qpos: np.ndarray
     init_qvel: np.ndarray
     init_warmstart: np.ndarray
+    start_qpos: np.ndarray  # (P, nq) the pool of episode starts
+    start_qvel: np.ndarray  # (P, nv)
+    start_ctrl: np.ndarray  # (P, nu)
+    start_warmstart: np.ndarray  # (P, nv)
 
     def action_to_ctrl(self, xp, action):
         """Policy action in [-1, 1] -> position targets, affinely onto each joint's range."""
@@ -77,11 +87,35 @@ def build_model(config: EnvConfig) -> SelfTouchModel:
     d.ctrl[:] = rest
     for _ in range(SETTLE_STEPS):
         mujoco.mj_step(m, d)
+    settled = (d.qpos.copy(), d.qvel.copy(), d.qacc_warmstart.copy())
+    pool = _start_pool(m, d, rest, config)
+    mujoco.mj_resetData(m, d)
+    d.qpos[:], d.qvel[:], d.qacc_warmstart[:] = settled
     return SelfTouchModel(
         mj_model=m, sensing=sensing, qpos_idx=qpos_idx, qvel_idx=qvel_idx, torque_idx=torque_idx,
         speed_idx=speed_idx, ctrl_lo=m.actuator_ctrlrange[:, 0].copy(), ctrl_hi=m.actuator_ctrlrange[:, 1].copy(),
-        rest_ctrl=rest, init_qpos=d.qpos.copy(), init_qvel=d.qvel.copy(), init_warmstart=d.qacc_warmstart.copy(),
+        rest_ctrl=rest, init_qpos=settled[0], init_qvel=settled[1], init_warmstart=settled[2],
+        start_qpos=pool[0], start_qvel=pool[1], start_ctrl=pool[2], start_warmstart=pool[3],
     )
+
+
+def _start_pool(m: mujoco.MjModel, settled: mujoco.MjData, rest: np.ndarray, config: EnvConfig):
+    rng = np.random.default_rng(config.reset_pool_seed)
+    half_range = 0.5 * (m.actuator_ctrlrange[:, 1] - m.actuator_ctrlrange[:, 0])
+    out = [[], [], [], []]
+    d = mujoco.MjData(m)
+    for _ in range(config.reset_pool_size):
+        mujoco.mj_copyData(d, m, settled)
+        d.ctrl[:] = rest
+        noise = rng.standard_normal((config.reset_noise_steps, m.nu))
+        targets = np.clip(rest + config.reset_noise_scale * half_range * noise,
+                          m.actuator_ctrlrange[:, 0], m.actuator_ctrlrange[:, 1])
+        for ctrl in targets:
+            d.ctrl[:] = ctrl
+            mujoco.mj_step(m, d)
+        for store, value in zip(out, (d.qpos, d.qvel, d.ctrl, d.qacc_warmstart)):
+            store.append(value.copy())
+    return tuple(np.stack(x) for x in out)
 
 
 def observe(xp, model: SelfTouchModel, touch, qpos, qvel, actuator_force):

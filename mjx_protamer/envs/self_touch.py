@@ -38,6 +38,13 @@ class SelfTouchEnv:
                       ctrl=jnp.asarray(self.model.rest_ctrl, jnp.float32),
                       qacc_warmstart=jnp.asarray(self.model.init_warmstart, jnp.float32))
         self.init_data = jax.jit(mjx.forward)(self.mjx_model, d)
+        # The pool of episode starts (model.py), forwarded once: a reset is then a gather.
+        pool = jax.tree.map(lambda x: jnp.broadcast_to(x, (self.config.reset_pool_size,) + x.shape), d)
+        pool = pool.replace(qpos=jnp.asarray(self.model.start_qpos, jnp.float32),
+                            qvel=jnp.asarray(self.model.start_qvel, jnp.float32),
+                            ctrl=jnp.asarray(self.model.start_ctrl, jnp.float32),
+                            qacc_warmstart=jnp.asarray(self.model.start_warmstart, jnp.float32))
+        self.start_data = jax.jit(jax.vmap(mjx.forward, in_axes=(None, 0)))(self.mjx_model, pool)
         # Contact slots are grouped by condim in MJX; each slot's dimension is fixed by the model.
         # Only the self-contact group's slots can touch a hand (when the floor has its own condim).
         contact = self.init_data._impl.contact
@@ -81,17 +88,9 @@ class SelfTouchEnv:
 
     # --- the env API ----------------------------------------------------------------------------
     def reset(self, rng: jax.Array) -> State:
-        rng, noise_rng = jax.random.split(rng)
-        half_range = jnp.asarray(0.5 * (self.model.ctrl_hi - self.model.ctrl_lo), jnp.float32)
-        rest = jnp.asarray(self.model.rest_ctrl, jnp.float32)
-        noise = jax.random.normal(noise_rng, (self.config.reset_noise_steps, self.action_size))
-        targets = jnp.clip(rest + self.config.reset_noise_scale * half_range * noise,
-                           self.model.ctrl_lo, self.model.ctrl_hi)
-
-        def settle(d, ctrl):
-            return mjx.step(self.mjx_model, d.replace(ctrl=ctrl)), None
-
-        d, _ = jax.lax.scan(settle, self.init_data, targets)
+        rng, pick = jax.random.split(rng)
+        index = jax.random.randint(pick, (), 0, self.config.reset_pool_size)
+        d = jax.tree.map(lambda x: x[index], self.start_data)
         touch, regions, extended = self.sense(d)
         zero_action = jnp.zeros(self.action_size)
         obs, _, metrics = self._transition(d, touch, regions, extended, touch, regions, zero_action)

@@ -16,9 +16,9 @@ contacts, constraint forces, actuator forces) at the current state and then inte
 features and torques of a step come from the forward pass at the pre-step positions while qpos and qvel
 are the integrated ones; the twin reads `MjData` right after `mj_step`, as the MJX env reads `mjx.Data`.
 
-Episode semantics follow the MJX env: reset settles the built model's start state, then runs
-`reset_noise_steps` physics steps at random targets `rest + scale * half_range * N(0, 1)` (clipped;
-NumPy RNG seeded through `reset(seed=)`); one `step` is one physics step. `terminated` is always False
+Episode semantics follow the MJX env: reset loads one of the model's pool of episode starts (the
+settled pose after its own `reset_noise_steps` random targets; see model.py), drawn with the NumPy RNG
+seeded through `reset(seed=)`; one `step` is one physics step. `terminated` is always False
 (the task has no terminal state); `truncated` is True at `episode_length` steps and when a diverged
 (NaN) physics state was replaced by the settled start state, which `info["nan_reset"]` reports.
 """
@@ -72,7 +72,6 @@ class SelfTouchTwinEnv(gym.Env):
         self.observation_size = self.config.observation_size
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.observation_size,), np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_size,), np.float32)
-        self._half_range = 0.5 * (self.model.ctrl_hi - self.model.ctrl_lo)
         self._steps = 0
         self._prev_touch = np.zeros(4 * (self.config.k + 3))
         self._prev_regions = np.zeros(sensing.N_REGIONS, bool)
@@ -151,14 +150,12 @@ class SelfTouchTwinEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         m, d = self.mj_model, self.data
-        self._set_start_state()
-        rest = self.model.rest_ctrl
-        noise = self.np_random.standard_normal((self.config.reset_noise_steps, self.action_size))
-        targets = np.clip(rest + self.config.reset_noise_scale * self._half_range * noise,
-                          self.model.ctrl_lo, self.model.ctrl_hi)
-        for ctrl in targets:
-            d.ctrl[:] = ctrl
-            mujoco.mj_step(m, d)
+        # An episode starts from one of the model's pool of settled, randomly perturbed states
+        # (model.py), as in the MJX env.
+        i = int(self.np_random.integers(self.config.reset_pool_size))
+        mujoco.mj_resetData(m, d)
+        self.set_state(self.model.start_qpos[i], self.model.start_qvel[i], self.model.start_ctrl[i],
+                       self.model.start_warmstart[i])
         s = self.signals()
         s["reward_terms"] = np.zeros_like(s["reward_terms"])
         self._prev_touch, self._prev_regions = s["touch"], s["region_mask"]
