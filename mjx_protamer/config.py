@@ -68,7 +68,7 @@ def _coerce(value: Any, tp: Any, field: str) -> Any:
             return tuple(_coerce(v, args[0], f"{field}[{i}]") for i, v in enumerate(value))
         if len(args) != len(value):
             raise ConfigError(f"config field '{field}': expected {len(args)} items, got {len(value)}")
-        return tuple(_coerce(v, a, f"{field}[{i}]") for i, (v, a) in enumerate(zip(args, value)))
+        return tuple(_coerce(v, a, f"{field}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
     if dataclasses.is_dataclass(tp):
         if isinstance(value, tp):
             return value

@@ -7,8 +7,10 @@ audio_frontend/bench.py); this module only wires them to the command line and pr
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import sys
 
 # name -> (module, function that returns the JSON-able result)
 BENCHMARKS = {
@@ -33,7 +35,9 @@ def _print_table(result: dict, prefix: str = "") -> None:
 
 def _run(args: argparse.Namespace) -> int:
     module, func, _ = BENCHMARKS[args.benchmark]
-    result = getattr(importlib.import_module(module), func)(args)
+    # Libraries print notices on stdout (mujoco.mjx: "Failed to import warp"); keep stdout for the result.
+    with contextlib.redirect_stdout(sys.stderr):
+        result = getattr(importlib.import_module(module), func)(args)
     if args.json:
         print(json.dumps(result, indent=2, sort_keys=True))
     else:

@@ -33,15 +33,16 @@ class EpisodeWrapper(Wrapper):
 
     def reset(self, rng: jax.Array) -> State:
         state = self.env.reset(rng)
-        info = dict(state.info, steps=jnp.zeros((), jnp.int32), truncation=jnp.zeros(()))
+        info = dict(state.info, steps=jnp.zeros((), jnp.int32), truncation=jnp.zeros((), jnp.float32))
         return state.replace(info=info)
 
     def step(self, state: State, action: jax.Array) -> State:
         nstate = self.env.step(state, action)
         steps = state.info["steps"] + 1
         out_of_time = steps >= self.episode_length
-        truncation = jnp.where(out_of_time & (nstate.done == 0), 1.0, 0.0)
-        done = jnp.where(out_of_time, 1.0, nstate.done)
+        # Strongly typed float32: a weak type here would change the carry's type and recompile.
+        truncation = (out_of_time & (nstate.done == 0)).astype(jnp.float32)
+        done = jnp.where(out_of_time, jnp.float32(1.0), nstate.done).astype(jnp.float32)
         info = dict(nstate.info, steps=steps, truncation=truncation)
         return nstate.replace(done=done, info=info)
 

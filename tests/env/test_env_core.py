@@ -222,3 +222,20 @@ def test_wrong_action_shape_is_refused(batched):
     single = jax.tree.map(lambda x: x[0], reset(jax.random.split(jax.random.PRNGKey(0), 2)))
     with pytest.raises(ValueError, match=r"action must have shape \(14,\)"):
         env.step(single, jnp.zeros(13))
+
+
+def test_fixed_length_tuple_fields_load(tmp_path):
+    import dataclasses
+
+    from mjx_protamer.config import from_dict
+
+    @dataclasses.dataclass(frozen=True)
+    class Point:
+        xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        names: tuple[str, ...] = ()
+
+    assert from_dict(Point, {"xyz": [1, 2, 3.5], "names": ["a"]}) == Point((1.0, 2.0, 3.5), ("a",))
+    with pytest.raises(ConfigError, match=r"xyz\[1\]"):
+        from_dict(Point, {"xyz": [1, "b", 3]})
+    with pytest.raises(ConfigError, match="expected 3 items"):
+        from_dict(Point, {"xyz": [1, 2]})
