@@ -24,6 +24,13 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/pretrain-<time>)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--feedback", default=None, metavar="simulated:KIND",
+                   help="DeepTAMER with a simulated teacher per env, inside the jitted chunk: simulated:keyboard, "
+                   "simulated:prosody or simulated:speech (writes feedback.jsonl and reward_model.msgpack too)")
+    p.add_argument("--feedback-config", type=Path, default=None,
+                   help="configs/feedback_*.yaml: its `feedback` section (teacher rule, channel, credit, reward "
+                   "model) and optional `batched` section; its `pretrain` section is used only without --config. "
+                   "--set feedback.X=... / batched.X=... override it")
     p.set_defaults(handler=_pretrain)
 
     e = subparsers.add_parser(
@@ -59,18 +66,66 @@ def _pretrain(args: argparse.Namespace) -> int:
 
     if args.resume and args.out is None:
         raise ConfigError("--resume needs --out, the run directory to continue")
-    if args.config is None:  # overrides apply on top of the whole built-in default, section by section
-        config = from_dict(PretrainConfig, apply_overrides(to_dict(PretrainConfig()), args.overrides))
+    fb_overrides = [o for o in args.overrides if o.split("=", 1)[0].split(".")[0] in ("feedback", "batched")]
+    overrides = [o for o in args.overrides if o not in fb_overrides]
+    if args.feedback is None and (args.feedback_config is not None or fb_overrides):
+        raise ConfigError("--feedback-config and --set feedback.*/batched.* need --feedback simulated:KIND")
+    fb_raw: dict = {}
+    if args.feedback_config is not None:
+        import yaml
+
+        if not args.feedback_config.is_file():
+            raise ConfigError(f"config file {args.feedback_config} does not exist")
+        fb_raw = yaml.safe_load(args.feedback_config.read_text()) or {}
+        unknown = sorted(set(fb_raw) - {"pretrain", "feedback", "batched"})
+        if unknown:
+            raise ConfigError(f"{args.feedback_config}: unknown key(s) {', '.join(unknown)}; "
+                              "allowed keys: pretrain, feedback, batched")
+    if args.config is None and "pretrain" in fb_raw:
+        config = from_dict(PretrainConfig, apply_overrides(fb_raw["pretrain"] or {}, overrides))
+    elif args.config is None:  # overrides apply on top of the whole built-in default, section by section
+        config = from_dict(PretrainConfig, apply_overrides(to_dict(PretrainConfig()), overrides))
     else:
-        config = load_config(PretrainConfig, args.config, args.overrides)
+        config = load_config(PretrainConfig, args.config, overrides)
+    feedback = None
+    if args.feedback is not None:
+        feedback = _feedback_setup(args.feedback, fb_raw, fb_overrides)
     _enable_compile_cache()
     out = args.out or Path("runs") / time.strftime("pretrain-%Y%m%d-%H%M%S")
 
     from mjx_protamer.experiments.pretrain import report, run_pretrain
 
-    result = run_pretrain(config, out, resume=args.resume, progress=not args.no_progress)
+    result = run_pretrain(config, out, resume=args.resume, progress=not args.no_progress, feedback=feedback)
     print(report(result))
     return 0
+
+
+def _feedback_setup(spec: str, raw: dict, overrides: list[str]):
+    """The FeedbackSetup of `--feedback simulated:KIND`: the feedback section from the file (or the defaults
+    of configs/feedback_KIND.yaml), with the channel of the flag."""
+    import dataclasses
+
+    from mjx_protamer.config import apply_overrides, from_dict, to_dict
+    from mjx_protamer.experiments.feedback_train import (BatchedFeedbackConfig, default_feedback_config,
+                                                         parse_feedback, step_window_note)
+    from mjx_protamer.experiments.pretrain import FeedbackSetup
+    from mjx_protamer.human.tamer_loop import FeedbackConfig
+    from mjx_protamer.human.teachers import with_channel
+
+    kind = parse_feedback(spec)
+    sections = {"feedback": raw.get("feedback") if "feedback" in raw else to_dict(default_feedback_config(kind)),
+                "batched": raw.get("batched") or {}}
+    apply_overrides(sections, overrides)
+    fb = from_dict(FeedbackConfig, sections["feedback"])
+    file_kind = fb.teacher.channel.kind
+    fb = dataclasses.replace(fb, teacher=with_channel(fb.teacher, kind))
+    if "feedback" in raw and file_kind != kind:
+        print(f"note: the feedback config's channel is {file_kind}; --feedback {spec} simulates {kind}",
+              file=sys.stderr)
+    note = step_window_note(kind, fb.credit, fb.dt)
+    if note:
+        print(note, file=sys.stderr)
+    return FeedbackSetup(kind, fb, from_dict(BatchedFeedbackConfig, sections["batched"]))
 
 
 def _eval(args: argparse.Namespace) -> int:
