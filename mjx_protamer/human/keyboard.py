@@ -1,6 +1,6 @@
 """Keyboard feedback: + / - / 0 read live from the terminal in a host thread, each press confirmed.
 
-`KeyboardFeedback(queue).start()` puts the terminal in cbreak mode (single keys, no Enter) and reads
+`KeyboardFeedback(queue).start()` puts the terminal (stdin, or any tty `stream`) in cbreak mode (single keys, no Enter) and reads
 keys in a daemon thread: '+' (or '=') -> +1, '-' -> -1, '0' -> 0; every press becomes a
 FeedbackEvent(source="keyboard", t_start = t_end = the wall-clock time of the press) put into the
 FeedbackQueue, and a confirmation line is printed at once ("[feedback] +1 accepted" or the reason it
@@ -63,22 +63,34 @@ class KeyboardFeedback:
             self.handle_key(ch)
 
     def start(self) -> "KeyboardFeedback":
-        if self.stream is sys.stdin and sys.stdin.isatty():
+        if self._isatty():
             import termios
             import tty
 
-            self._saved_tty = termios.tcgetattr(sys.stdin.fileno())
-            tty.setcbreak(sys.stdin.fileno())
+            fd = self.stream.fileno()
+            self._saved_tty = termios.tcgetattr(fd)
+            tty.setcbreak(fd)  # single keys, no Enter; Ctrl-C still sends SIGINT
+            termios.tcflush(fd, termios.TCIFLUSH)  # keys typed before now (e.g. while compiling) are dropped
         self.out.write("[feedback] keys: + good, - bad, 0 neutral, q quit\n")
         self.out.flush()
         self._thread = threading.Thread(target=self._run, name="keyboard-feedback", daemon=True)
         self._thread.start()
         return self
 
+    def _isatty(self) -> bool:
+        try:
+            return self.stream.isatty()
+        except (AttributeError, ValueError, OSError):
+            return False
+
     def stop(self) -> None:
+        """Stop reading and restore the terminal (idempotent)."""
         self.stop_requested.set()
         if self._saved_tty is not None:
             import termios
 
-            termios.tcsetattr(sys.stdin.fileno(), termios.TCSADRAIN, self._saved_tty)
+            try:
+                termios.tcsetattr(self.stream.fileno(), termios.TCSADRAIN, self._saved_tty)
+            except (termios.error, ValueError, OSError):
+                pass  # the terminal is gone
             self._saved_tty = None

@@ -134,6 +134,7 @@ class TamerRun:
         self.credited = 0
         self.events = 0
         self.human_params = self.model.params if self.use_model else None
+        self.outcomes: list[tuple] = []  # (event, Credit or None, reason or None) of the last drain
 
     def _watched_rows(self, ptr_before: int) -> dict[str, np.ndarray]:
         tc = self.config.pretrain.train
@@ -175,11 +176,14 @@ class TamerRun:
         return out
 
     def process_events(self, step: int) -> list:
-        """Drain, log, credit and learn from the queued events; returns the credits made."""
+        """Drain, log, credit and learn from the queued events; returns the credits made. Each drained
+        event's outcome (credit or the reason it credits nothing) is in `self.outcomes`."""
         credits = []
+        self.outcomes = []
         for event in self.queue.drain(self.log, step=step):
             self.events += 1
             credit, why = self.assigner.assign(event)
+            self.outcomes.append((event, credit, why))
             if credit is None:
                 if self.log is not None:
                     self.log.note(event="not credited", reason=why, t_start=event.t_start, value=event.value)

@@ -1,0 +1,256 @@
+"""`protamer finetune` end to end on the toy env: keyboard through a real pseudo-terminal, Ctrl-C, Deep COACH
+through the real queue, voice (Whisper on espeak-ng speech, prosody on a tiny offline wav2vec2) and the
+errors a live user can hit."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import pty
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mjx_protamer.human.keyboard import KeyboardFeedback
+from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONUNBUFFERED": "1"}
+
+
+def protamer(*argv) -> list[str]:
+    return [sys.executable, "-m", "mjx_protamer.cli", *map(str, argv)]
+
+
+@pytest.fixture(scope="module")
+def toy_run(tmp_path_factory):
+    """A tiny toy-env pretrain run (about 25 s)."""
+    out = tmp_path_factory.mktemp("toy") / "pt"
+    subprocess.run(protamer("pretrain", "--out", out, "--no-progress", "--set", "env_name=toy",
+                            "--set", "ddpg.actor_hidden=[16]", "--set", "ddpg.critic_hidden=[16,16]",
+                            "--set", "train.num_envs=4", "--set", "train.episode_length=50",
+                            "--set", "train.total_env_steps=1200", "--set", "train.warmup_env_steps=400",
+                            "--set", "train.chunk_steps=100"),
+                   check=True, capture_output=True, env=ENV, cwd=ROOT, timeout=300)
+    return out
+
+
+class PtyProc:
+    """A command whose stdin, stdout and stderr are a pseudo-terminal, as in a real terminal."""
+
+    def __init__(self, argv):
+        self.master, slave = pty.openpty()
+        self.proc = subprocess.Popen(argv, stdin=slave, stdout=slave, stderr=slave, env=ENV, cwd=ROOT,
+                                     start_new_session=True)
+        os.close(slave)
+        self.text = ""
+
+    def read_until(self, pattern: str, timeout: float = 240.0) -> str:
+        end = time.time() + timeout
+        while pattern not in self.text:
+            if time.time() > end:
+                raise AssertionError(f"{pattern!r} not seen in {timeout} s; output:\n{self.text[-3000:]}")
+            r, _, _ = select.select([self.master], [], [], 0.2)
+            if r:
+                try:
+                    self.text += os.read(self.master, 65536).decode(errors="replace")
+                except OSError:  # the child closed the terminal
+                    if self.proc.poll() is not None and pattern not in self.text:
+                        raise AssertionError(f"exited {self.proc.returncode} before {pattern!r}:\n{self.text[-3000:]}")
+        return self.text
+
+    def send(self, keys: str) -> None:
+        os.write(self.master, keys.encode())
+
+    def wait(self, timeout: float = 120.0) -> int:
+        end = time.time() + timeout
+        while self.proc.poll() is None and time.time() < end:
+            r, _, _ = select.select([self.master], [], [], 0.2)
+            if r:
+                try:
+                    self.text += os.read(self.master, 65536).decode(errors="replace")
+                except OSError:
+                    pass
+        if self.proc.poll() is None:
+            self.proc.kill()
+            raise AssertionError(f"did not exit; output:\n{self.text[-3000:]}")
+        try:
+            while select.select([self.master], [], [], 0.1)[0]:
+                self.text += os.read(self.master, 65536).decode(errors="replace")
+        except OSError:
+            pass
+        os.close(self.master)
+        return self.proc.returncode
+
+
+def reward_model_changed(out: Path, obs_size=6, action_size=2) -> bool:
+    from mjx_protamer.human.reward_model import RewardModel, RewardModelConfig
+    import jax
+
+    fresh = RewardModel(RewardModelConfig(), obs_size, action_size, seed=0)
+    saved = RewardModel(RewardModelConfig(), obs_size, action_size, seed=0)
+    saved.load(out / "reward_model.msgpack")
+    return saved.updates > 0 and any(not np.allclose(a, b) for a, b in zip(
+        jax.tree.leaves(fresh.params), jax.tree.leaves(saved.params)))
+
+
+# ---------------------------------------------------------------- the keyboard thread on a real terminal
+
+def test_keyboard_thread_reads_single_keys_from_a_pty_and_restores_the_terminal():
+    import termios
+
+    master, slave = pty.openpty()
+    stream = os.fdopen(slave, "r", buffering=1)
+    before = termios.tcgetattr(slave)
+    q, out = FeedbackQueue(), io.StringIO()
+    kb = KeyboardFeedback(q, stream=stream, out=out).start()
+    assert not termios.tcgetattr(slave)[3] & termios.ICANON  # cbreak: keys come without Enter
+    os.write(master, b"+x-0q")
+    kb._thread.join(5)
+    kb.stop()
+    assert termios.tcgetattr(slave)[3] == before[3]  # terminal restored
+    assert [e.value for e in q.drain()] == [1.0, -1.0, 0.0]
+    assert "[feedback] +1 accepted" in out.getvalue() and "q: stopping" in out.getvalue()
+    stream.close()
+    os.close(master)
+
+
+# ---------------------------------------------------------------- errors a live user can hit (fast)
+
+def run_main(*argv) -> int:
+    from mjx_protamer.cli import main
+    return main(["finetune", *map(str, argv)])
+
+
+def test_missing_checkpoint_is_a_clear_error(tmp_path, capsys):
+    assert run_main("--feedback", "none", "--checkpoint", tmp_path / "nope", "--out", tmp_path / "o") == 2
+    assert "no such file or directory" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert run_main("--feedback", "none", "--checkpoint", tmp_path / "empty", "--out", tmp_path / "o") == 2
+    assert "is not a pretrain run directory" in capsys.readouterr().err
+
+
+def test_keyboard_without_a_terminal_is_a_clear_error(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))
+    assert run_main("--feedback", "keyboard", "--checkpoint", tmp_path, "--out", tmp_path / "o") == 2
+    assert "stdin is not a terminal" in capsys.readouterr().err
+
+
+def test_bad_listen_source_and_missing_wav(tmp_path, capsys):
+    assert run_main("--feedback", "whisper", "--listen-source", "speaker", "--checkpoint", tmp_path) == 2
+    assert "--listen-source must be 'mic' or 'wav:PATH'" in capsys.readouterr().err
+    code = run_main("--feedback", "whisper", "--listen-source", f"wav:{tmp_path / 'none.wav'}", "--checkpoint", tmp_path)
+    assert code == 3 and "none.wav" in capsys.readouterr().err
+
+
+def test_corrupt_checkpoint_is_a_clear_error(toy_run, tmp_path, capsys):
+    import shutil
+
+    bad = tmp_path / "bad"
+    shutil.copytree(toy_run, bad)
+    for step in (bad / "checkpoints").iterdir():
+        shutil.rmtree(step / "default")
+    assert run_main("--feedback", "none", "--checkpoint", bad, "--out", tmp_path / "o") == 2
+    assert "cannot be" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- keyboard, live, in a pseudo-terminal
+
+def test_finetune_keyboard_in_a_terminal_confirms_credits_saves_and_loads(toy_run, tmp_path):
+    out = tmp_path / "ft"
+    p = PtyProc(protamer("finetune", "--feedback", "keyboard", "--checkpoint", toy_run, "--out", out))
+    p.read_until("ready: give feedback now")
+    p.read_until("[step")
+    time.sleep(0.6)
+    p.send("+")
+    p.read_until("[event] keyboard +1.00")
+    time.sleep(0.6)
+    p.send("-")
+    p.read_until("[event] keyboard -1.00")
+    p.send("q")
+    assert p.wait() == 0, p.text
+    text = p.text
+    assert "[feedback] +1 accepted" in text and "[feedback] -1 accepted" in text and "credited steps" in text
+    assert "saved checkpoint, reward model and feedback log" in text
+    accepted = FeedbackLog.read(out / "feedback.jsonl")
+    assert [e.value for e in accepted] == [1.0, -1.0] and all(e.source == "keyboard" for e in accepted)
+    assert reward_model_changed(out)
+    from mjx_protamer.experiments.evaluate import load_run
+    cfg, _, state, step = load_run(out)  # what `protamer eval --checkpoint OUT` loads
+    assert cfg.train.num_envs == 1 and step > 0
+
+
+def test_finetune_ctrl_c_mid_run_saves_and_exits_130(toy_run, tmp_path):
+    out = tmp_path / "ft"
+    p = PtyProc(protamer("finetune", "--feedback", "keyboard", "--checkpoint", toy_run, "--out", out))
+    p.read_until("ready: give feedback now")
+    p.send("+")
+    p.read_until("[event] keyboard +1.00")
+    p.send("\x03")  # Ctrl-C typed at the terminal: SIGINT to the foreground process
+    assert p.wait() == 130, p.text
+    assert "Ctrl-C: stopping after this chunk" in p.text and "saved checkpoint" in p.text
+    assert (out / "reward_model.msgpack").is_file() and any((out / "checkpoints").iterdir())
+    records = FeedbackLog.records(out / "feedback.jsonl")
+    assert records[-1].get("event") == "end" and len(FeedbackLog.read(out / "feedback.jsonl")) == 1
+
+
+# ---------------------------------------------------------------- Deep COACH
+
+def _coach_run(clock=None):
+    from mjx_protamer.agents.coach import CoachConfig
+    from mjx_protamer.envs.toy import PointReachEnv
+    from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
+
+    cfg = CoachRunConfig(coach=CoachConfig(hidden=(16,), learning_rate=3e-3, human_delay_steps=1, batch_windows=8),
+                         chunk_steps=20, episode_length=50, dt=0.05, min_interval_steps=2)
+    return CoachRun(cfg, PointReachEnv(), feedback=None, clock=clock)
+
+
+def test_coach_run_learns_from_events_through_the_real_queue(tmp_path):
+    """A scripted human who wants the point to move right: after each chunk, 5 events go through the real
+    FeedbackQueue, each stamped just after a step it judges (+1 when that step's sampled action went
+    further right than the policy's mean, else -1). Nothing else trains the policy; the mean horizontal
+    action on held-out states must rise by a clear margin."""
+    from mjx_protamer.human.clock import VirtualClock
+    from mjx_protamer.human.events import FeedbackEvent
+
+    run = _coach_run(clock=VirtualClock(start=1000.0))
+    run.log = FeedbackLog(tmp_path / "fb.jsonl")
+    rng = np.random.default_rng(0)
+    test_obs = rng.uniform(-1, 1, (200, 6)).astype(np.float32)
+    before = float(run.learner.mean_action(test_obs)[:, 0].mean())
+    for _ in range(60):
+        first = run.first_step
+        m = run.step_chunk()
+        mean = run.learner.mean_action(m["obs"])
+        for j in sorted(rng.choice(np.arange(run.config.min_interval_steps, 19), 5, replace=False)):
+            t = run.step_clock.time_of(first + j + 1) + 0.01  # pressed while the next step was shown
+            value = 1.0 if m["actions"][j, 0] > mean[j, 0] else -1.0
+            assert run.queue.put(FeedbackEvent(t, t, "keyboard", value))
+    run.process_events(run.first_step - 1)
+    run.close()
+    after = float(run.learner.mean_action(test_obs)[:, 0].mean())
+    print(f"COACH mean horizontal action {before:+.3f} -> {after:+.3f}; {run.corrections} corrections "
+          f"of {run.events} events, {run.learner.updates} updates")
+    assert run.events == 300 and run.corrections > 100 and run.learner.updates == run.corrections
+    assert after > before + 0.2
+    assert len(FeedbackLog.read(tmp_path / "fb.jsonl")) == 300
+
+
+def test_finetune_coach_learner_saves_a_policy_that_loads(toy_run, tmp_path, capsys):
+    out = tmp_path / "coach"
+    assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run, "--out", out,
+                    "--max-chunks", "2") == 0
+    assert "saved coach policy" in capsys.readouterr().out
+    assert (out / "coach_policy.msgpack").is_file() and (out / "feedback.jsonl").is_file()
+    assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run, "--out", tmp_path / "again",
+                    "--max-chunks", "1", "--coach-policy", out / "coach_policy.msgpack") == 0
+    assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run,
+                    "--coach-policy", tmp_path / "missing.msgpack") == 2
