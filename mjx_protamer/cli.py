@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     "mjx_protamer.commands.voice",
     "mjx_protamer.commands.train",
     "mjx_protamer.commands.feedback",
+    "mjx_protamer.commands.reproduce",
 )
 
 
