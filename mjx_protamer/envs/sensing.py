@@ -21,6 +21,7 @@ from mjx_protamer.envs import body
 from mjx_protamer.envs.touch import TouchTables, project_to_surface
 
 N_REGIONS = len(body.REGIONS)
+HAND_HAND_ENTRIES = 2
 N_EXTENDED = len(body.EXTENDED_REGIONS)
 
 
@@ -74,14 +75,20 @@ def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geo
     geom (n, 2) int, pos (n, 3), dist (n,), normal_force (n,): the contacts (inactive ones allowed:
     dist >= 0 ignores them). geom_xpos (ngeom, 3), geom_xmat (ngeom, 3, 3): geom frames.
     """
-    # Each contact is seen from both of its geoms: a palm touching the other palm touches both hands.
-    own = xp.concatenate([geom[:, 0], geom[:, 1]])
-    other = xp.concatenate([geom[:, 1], geom[:, 0]])
-    p_world = xp.concatenate([pos, pos])
-    force = xp.concatenate([normal_force, normal_force])
-    active = xp.concatenate([dist < 0, dist < 0])
+    # Each contact is seen from its hand geom. A hand-to-hand contact touches both hands: the second
+    # hand's view is added for the HAND_HAND_ENTRIES deepest such contacts (more at once is rare).
+    geom_hand = tables["geom_hand"]
+    g1, g2 = geom[:, 0], geom[:, 1]
+    first_is_hand = geom_hand[g1] >= 0
+    both_hands = first_is_hand & (geom_hand[g2] >= 0) & (dist < 0)
+    extra = nearest_k(xp, xp.where(both_hands, dist, 1e9), min(HAND_HAND_ENTRIES, geom.shape[0]))
+    own = xp.concatenate([xp.where(first_is_hand, g1, g2), g2[extra]])
+    other = xp.concatenate([xp.where(first_is_hand, g2, g1), g1[extra]])
+    p_world = xp.concatenate([pos, pos[extra]])
+    force = xp.concatenate([normal_force, normal_force[extra]])
+    active = xp.concatenate([dist < 0, both_hands[extra]])
 
-    hand = tables["geom_hand"][own]
+    hand = geom_hand[own]
     region = tables["geom_region"][other]
     is_hand = hand >= 0
     hand_i = xp.where(is_hand, hand, 0)
