@@ -62,10 +62,13 @@ def register(subparsers) -> None:
                    help="do not pace live chunks to real time (they are shown as fast as they are computed)")
     v = p.add_argument_group("voice (--feedback prosody|whisper)")
     v.add_argument("--listen-source", default="mic", metavar="mic|wav:PATH",
-                   help="the microphone (default) or a WAV file played at real-time pace")
+                   help="the microphone (default) or a WAV file played at real-time pace (the run ends with it)")
     v.add_argument("--voice-config", default=None, help="front-end YAML (default: configs/voice.yaml)")
     v.add_argument("--voice-set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a voice config field, e.g. --voice-set prosody.tau=0.2 (repeatable)")
+    v.add_argument("--keywords-only", action="store_true",
+                   help="whisper: decide by the keyword rules alone (no sentiment classifier weights needed); "
+                   "an utterance that is not a single keyword gives 0")
     v.add_argument("--save-segments", default=None, metavar="DIR",
                    help="save each scored utterance as WAV there (default: OUT/segments)")
     c = p.add_argument_group("Deep COACH (--learner coach)")
@@ -214,13 +217,14 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
         run.state = run.state.replace(**{k: getattr(loaded, k) for k in (
             "actor_params", "critic_params", "target_actor_params", "target_critic_params",
             "actor_opt_state", "critic_opt_state")})
+        run.commit_state()  # restored arrays are uncommitted: the second chunk would compile again
         saved_config = None
     if run.log is not None:
         run.log.note(event="start", feedback=args.feedback, learner=args.learner, checkpoint=str(args.checkpoint),
                      checkpoint_step=int(step), chunk_steps=chunk_steps, dt=fb.dt)
 
     keys = listener = stop_event = None
-    listener_said = False
+    listener_said = wav_over = False
     interrupted = False
     with _Stopper() as stopper:
         try:
@@ -252,7 +256,9 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                         stop_event = mp.get_context("spawn").Event()
                         listener = start_listener(run.queue, vcfg, scorer=args.feedback, source=source,
                                                   save_dir=args.save_segments or str(out / "segments"),
-                                                  stop_event=stop_event)
+                                                  stop_event=stop_event, scorer_kwargs=(
+                                                      {"load_classifier": False} if args.keywords_only
+                                                      and args.feedback == "whisper" else None))
                         print(f"[finetune] voice listener ({args.feedback}, {args.listen_source}) started, pid "
                               f"{listener.pid}; its lines start with [voice]", flush=True)
                     if live:
@@ -262,8 +268,15 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     from audio_frontend.listen import listener_status
                     said = listener_status(listener)
                     if said is not None:
-                        print(f"[finetune] {said}", flush=True)
                         listener_said = True
+                        if listener.exitcode == 0 and args.listen_source.startswith("wav:"):
+                            # a recorded session replayed: its last events are in; one more chunk drains them
+                            print("[finetune] the WAV file is over: finishing", flush=True)
+                            wav_over = True
+                        else:
+                            print(f"[finetune] {said}", flush=True)
+                elif wav_over:
+                    break
                 if live and not args.no_pace:  # show the chunk at real-time pace
                     spare = t0 + chunk_steps * fb.dt - time.time()
                     if spare > 0:

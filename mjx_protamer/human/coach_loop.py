@@ -80,6 +80,7 @@ class CoachRun:
         self.key = jax.random.PRNGKey(config.seed + 7)
         self.key, k = jax.random.split(self.key)
         self.env_state = jax.jit(self.venv.reset)(k[None])
+        self._commit()
         self._rollout = jax.jit(functools.partial(_rollout, self.venv, self.learner.policy.apply,
                                                   config.coach.min_log_std, config.chunk_steps))
         self.simulated = feedback is not None and feedback.startswith("simulated")
@@ -97,6 +98,13 @@ class CoachRun:
         self.corrections = 0
         self.last_step_used: int | None = None
         self.outcomes: list[tuple] = []  # (event, step or None, reason or None) of the last drain
+
+    def _commit(self) -> None:
+        """Committed arrays everywhere (see TamerRun.commit_state): one compile of rollout and update."""
+        device = jax.devices()[0]
+        lr = self.learner
+        lr.params, lr.opt_state = jax.device_put((lr.params, lr.opt_state), device)
+        self.env_state = jax.device_put(self.env_state, device)
 
     @property
     def params(self):
@@ -160,6 +168,7 @@ class CoachRun:
 
         self.learner.params = serialization.from_bytes(self.learner.params, Path(path).read_bytes())
         self.learner.opt_state = self.learner.optimizer.init(self.learner.params)
+        self._commit()
 
     def close(self) -> None:
         if self.log is not None:

@@ -113,6 +113,7 @@ class TamerRun:
         self.trainer = make_train(config.pretrain, env, human_reward_fn=self.model.apply if self.use_model else None,
                                   devices=jax.devices()[:1])
         self.state = self.trainer.init(jax.random.PRNGKey(tc.seed)) if state is None else state
+        self.commit_state()
         capacity = self.state.replay.capacity
         if capacity < tc.chunk_steps * tc.num_envs:
             raise ValueError(f"the DDPG replay ({capacity} rows) must hold one chunk "
@@ -135,6 +136,15 @@ class TamerRun:
         self.events = 0
         self.human_params = self.model.params if self.use_model else None
         self.outcomes: list[tuple] = []  # (event, Credit or None, reason or None) of the last drain
+
+    def commit_state(self) -> None:
+        """Put the train state (and reward-model params) on the device as committed arrays. Arrays made
+        outside a jit (init, a restored checkpoint) are uncommitted, the chunk's outputs committed, and jit
+        compiles once per kind: without this the second chunk would compile the whole chunk again."""
+        device = jax.devices()[0]
+        self.state = jax.device_put(self.state, device)
+        self.model.params = jax.device_put(self.model.params, device)
+        self.model.opt_state = jax.device_put(self.model.opt_state, device)
 
     def _watched_rows(self, ptr_before: int) -> dict[str, np.ndarray]:
         tc = self.config.pretrain.train
