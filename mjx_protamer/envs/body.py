@@ -82,7 +82,7 @@ REST_POSE_DEG: dict[str, float] = {
 
 
 @dataclasses.dataclass(frozen=True)
-class PhysicsOptions:
+class PhysicsConfig:
     """Simulator settings. The defaults are the fast MJX settings; `reference()` is MuJoCo's own."""
 
     timestep: float = 0.005
@@ -91,14 +91,25 @@ class PhysicsOptions:
     ls_iterations: int = 4
     self_condim: int = 1  # hand/body contacts: frictionless skin (1) or with friction (3)
     floor_condim: int = 3
-    cone: str = "pyramidal"
     eulerdamp: bool = False
     max_contact_points: int = 8  # per condim group, MJX keeps the deepest N (-1: all)
 
     @staticmethod
-    def reference() -> "PhysicsOptions":
-        return PhysicsOptions(iterations=100, ls_iterations=50, self_condim=3, eulerdamp=True,
-                              max_contact_points=-1)
+    def reference() -> "PhysicsConfig":
+        return PhysicsConfig(iterations=100, ls_iterations=50, self_condim=3, eulerdamp=True,
+                             max_contact_points=-1)
+
+    def validate(self) -> None:
+        from mjx_protamer.config import check
+
+        check(0 < self.timestep <= 0.02, "timestep", f"must be in (0, 0.02] s, got {self.timestep}")
+        check(self.solver in ("Newton", "CG"), "solver", f"must be 'Newton' or 'CG', got {self.solver!r}")
+        check(1 <= self.iterations <= 100, "iterations", f"must be in [1, 100], got {self.iterations}")
+        check(1 <= self.ls_iterations <= 100, "ls_iterations", f"must be in [1, 100], got {self.ls_iterations}")
+        check(self.self_condim in (1, 3), "self_condim", f"must be 1 or 3, got {self.self_condim}")
+        check(self.floor_condim in (1, 3), "floor_condim", f"must be 1 or 3, got {self.floor_condim}")
+        check(self.max_contact_points == -1 or self.max_contact_points >= 1, "max_contact_points",
+              f"must be -1 (all) or >= 1, got {self.max_contact_points}")
 
 
 def _fmt(v) -> str:
@@ -155,7 +166,7 @@ def _arm_xml(side: str) -> str:
     </body>"""
 
 
-def _pairs(opts: PhysicsOptions) -> list[str]:
+def _pairs(opts: PhysicsConfig) -> list[str]:
     body = ["hip", "lower_body", "upper_body", "head", "left_upper_leg", "right_upper_leg"]
     pairs = []
     for side, other in (("left", "right"), ("right", "left")):
@@ -185,16 +196,16 @@ def actuator_xml() -> str:
     return "\n    ".join(lines)
 
 
-def infant_xml(opts: PhysicsOptions | None = None) -> str:
+def infant_xml(opts: PhysicsConfig | None = None) -> str:
     """The MJCF of the infant scene with the given simulator settings."""
-    opts = opts or PhysicsOptions()
+    opts = opts or PhysicsConfig()
     flags = [] if opts.eulerdamp else ['eulerdamp="disable"']
     numeric = (f'<custom><numeric name="max_contact_points" data="{opts.max_contact_points}"/></custom>'
                if opts.max_contact_points > 0 else "")
     return f"""<mujoco model="mjx_protamer_infant">
   <compiler angle="degree" autolimits="true"/>
   <option timestep="{opts.timestep}" integrator="Euler" solver="{opts.solver}"
-          iterations="{opts.iterations}" ls_iterations="{opts.ls_iterations}" cone="{opts.cone}">
+          iterations="{opts.iterations}" ls_iterations="{opts.ls_iterations}" cone="pyramidal">
     <flag {" ".join(flags)}/>
   </option>
   {numeric}

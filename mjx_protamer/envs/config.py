@@ -6,35 +6,11 @@ import dataclasses
 
 from mjx_protamer.config import check
 from mjx_protamer.envs import body
+from mjx_protamer.envs.body import PhysicsConfig
 
 _SIDES = ("left", "right")
 _ARM = ("shoulder_horizontal", "shoulder_ad_ab", "shoulder_rotation", "elbow")
 ALL_JOINTS = tuple(f"{s}_{j}" for s in _SIDES for j in list(body.ARM_JOINTS) + ["fingers"])
-
-
-@dataclasses.dataclass(frozen=True)
-class PhysicsConfig:
-    timestep: float = 0.005
-    solver: str = "Newton"
-    iterations: int = 2
-    ls_iterations: int = 4
-    self_condim: int = 1
-    floor_condim: int = 3
-    eulerdamp: bool = False
-    max_contact_points: int = 8
-
-    def validate(self) -> None:
-        check(0 < self.timestep <= 0.02, "timestep", f"must be in (0, 0.02] s, got {self.timestep}")
-        check(self.solver in ("Newton", "CG"), "solver", f"must be 'Newton' or 'CG', got {self.solver!r}")
-        check(1 <= self.iterations <= 100, "iterations", f"must be in [1, 100], got {self.iterations}")
-        check(1 <= self.ls_iterations <= 100, "ls_iterations", f"must be in [1, 100], got {self.ls_iterations}")
-        check(self.self_condim in (1, 3), "self_condim", f"must be 1 or 3, got {self.self_condim}")
-        check(self.floor_condim in (1, 3), "floor_condim", f"must be 1 or 3, got {self.floor_condim}")
-        check(self.max_contact_points == -1 or self.max_contact_points >= 1, "max_contact_points",
-              f"must be -1 (all) or >= 1, got {self.max_contact_points}")
-
-    def options(self) -> body.PhysicsOptions:
-        return body.PhysicsOptions(**dataclasses.asdict(self))
 
 
 @dataclasses.dataclass(frozen=True)

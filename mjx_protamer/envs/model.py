@@ -62,7 +62,7 @@ def _name_ids(m: mujoco.MjModel, obj: mujoco.mjtObj, names) -> np.ndarray:
 
 @functools.lru_cache(maxsize=8)
 def build_model(config: EnvConfig) -> SelfTouchModel:
-    m = mujoco.MjModel.from_xml_string(body.infant_xml(config.physics.options()))
+    m = mujoco.MjModel.from_xml_string(body.infant_xml(config.physics))
     geom_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, i) for i in range(m.ngeom)]
     touch = build_touch_tables(k=config.k, spacing_hand=config.touch.spacing_hand,
                                spacing_fingers=config.touch.spacing_fingers,

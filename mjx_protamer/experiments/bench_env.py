@@ -9,7 +9,7 @@ One run measures, on this machine:
 - native MuJoCo physics-only steps/s: `mujoco.rollout.rollout` on all cores (one MjData per thread);
 - the NumPy twin's steps/s (native physics + NumPy sensing/reward, one env, Python loop);
 - contact fidelity: self-contact rate and region frequencies of the same held-random-target rollouts
-  (native C, NumPy twin) under the fast settings and under `PhysicsOptions.reference()` (MuJoCo's own
+  (native C, NumPy twin) under the fast settings and under `PhysicsConfig.reference()` (MuJoCo's own
   solver settings, all contacts, friction on skin), so a reader sees the cheap settings keep the contacts
   the task needs.
 
@@ -188,7 +188,7 @@ def contact_fidelity(episodes: int, steps: int, hold: int = 50, seed: int = 0) -
     from mjx_protamer.envs.config import EnvConfig, PhysicsConfig
     from mjx_protamer.envs.twin import SelfTouchTwinEnv
 
-    ref = body.PhysicsOptions.reference()
+    ref = body.PhysicsConfig.reference()
     ref_fields = {f.name: getattr(ref, f.name) for f in dataclasses.fields(PhysicsConfig)}
     settings = {"fast": EnvConfig(), "reference": EnvConfig(physics=PhysicsConfig(**ref_fields))}
     out = {}
