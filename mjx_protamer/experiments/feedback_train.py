@@ -119,13 +119,22 @@ def _signal_columns(names, term_names, obs_size, act_size):
     for name in names:
         if name in term_names:
             cols.append(("terms", term_names.index(name)))
+        elif name.startswith("obs_norm:"):  # L2 norm over obs slices, e.g. obs_norm:64:68,70:74 (arm speed)
+            idx = []
+            for part in name[9:].split(","):
+                a, b = (int(x) for x in part.split(":"))
+                if not 0 <= a < b <= obs_size:
+                    raise ConfigError(f"config field 'feedback.teacher.rule': {name!r} slices outside obs [0, {obs_size})")
+                idx += list(range(a, b))
+            cols.append(("obs_norm", tuple(idx)))
         elif name.startswith("obs:") and 0 <= int(name[4:]) < obs_size:
             cols.append(("obs", int(name[4:])))
         elif name.startswith("action:") and 0 <= int(name[7:]) < act_size:
             cols.append(("action", int(name[7:])))
         else:
             raise ConfigError(f"config field 'feedback.teacher.rule': signal {name!r} is not a reward term "
-                              f"({', '.join(term_names)}), obs:i or action:i (the in-jit teacher reads these)")
+                              f"({', '.join(term_names)}), obs:i, obs_norm:a:b[,c:d] or action:i "
+                              "(the in-jit teacher reads these)")
     return tuple(cols)
 
 
@@ -230,7 +239,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         rows = (ptr0 + jnp.arange(T)[:, None] * B + jnp.arange(B)[None, :]) % cap  # (T, B)
         obs, action, terms = data.obs[rows], data.action[rows], data.reward_terms[rows]
         src = {"terms": terms, "obs": obs, "action": action}
-        signals = jnp.stack([src[s][..., i] for s, i in cols], axis=-1)
+        signals = jnp.stack([jnp.linalg.norm(obs[..., jnp.asarray(i)], axis=-1) if s == "obs_norm" else src[s][..., i]
+                             for s, i in cols], axis=-1)
         rng, k_teach, k_lag, k_fresh = jax.random.split(fs.rng, 4)
         fs, value, valid, about, score = teach(fs, fp, signals, it0, k_teach)
 

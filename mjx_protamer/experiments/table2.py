@@ -59,9 +59,11 @@ class Condition:
     name: str
     channel: Literal["none", "keyboard", "prosody", "speech"] = "none"
     credit: Literal["step_window", "time_window"] = "time_window"
+    beta_scale: float = 1.0  # multiplies ddpg.reward_beta for this condition (a value: no recompile)
 
     def validate(self) -> None:
         check(bool(self.name), "name", "must not be empty")
+        check(self.beta_scale >= 0, "beta_scale", f"must be >= 0, got {self.beta_scale}")
 
 
 DEFAULT_CONDITIONS = (Condition("DDPG", "none"), Condition("DTK", "keyboard"), Condition("DTW", "speech"),
@@ -155,6 +157,7 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
             ts = ft.trainer.init(jax.random.PRNGKey(seed))
             fs = ft.init(seed)
             fp = ft.params(kind, credit)
+            fp = fp._replace(gain=fp.gain * cond.beta_scale)
             for chunk in range(1, tc.num_chunks + 1):
                 ts, fs, m, _ = ft.chunk(ts, fs, fp)
                 row = flatten(jax.device_get(m), env.reward_term_names)
@@ -199,6 +202,7 @@ def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> di
     for c in cfg.conditions:
         per_seed = evals[c.name]
         entry: dict = {"channel": c.channel, "credit": c.credit if c.channel != "none" else None,
+                       "beta": cfg.pretrain.ddpg.reward_beta * c.beta_scale if c.channel != "none" else 0.0,
                        "paper": PAPER.get(c.name)}
         for name in M.METRIC_NAMES:
             episodes = [v for s in cfg.seeds for v in per_seed[s]["per_episode"][name]]
