@@ -294,6 +294,10 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
             if keys is not None:
                 keys.stop()
             if listener is not None:
+                from audio_frontend.listen import listener_status
+                said = listener_status(listener)
+                if said is not None and not listener_said and listener.exitcode != 0:
+                    print(f"[finetune] {said}", flush=True)
                 stop_event.set()
                 listener.join(2.0)
                 if listener.is_alive():

