@@ -7,6 +7,8 @@ they are opened, so a listener process can be started with one.
 
 from __future__ import annotations
 
+import abc
+
 import queue as queue_lib
 import threading
 import time
@@ -113,7 +115,7 @@ def load_wav(path: str | Path, sample_rate: int = 16000, on_wrong_rate: str = "c
     return x
 
 
-class AudioSource:
+class AudioSource(abc.ABC):
     """Yields `(t_start_wallclock, chunk)`; `close()` releases the device. Use as a context manager."""
 
     sample_rate: int = 16000
@@ -123,8 +125,9 @@ class AudioSource:
     def chunk_samples(self) -> int:
         return max(1, int(round(self.sample_rate * self.chunk_s)))
 
-    def chunks(self) -> Iterator[tuple[float, np.ndarray]]:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abc.abstractmethod
+    def chunks(self) -> Iterator[tuple[float, np.ndarray]]:
+        """Chunks of `chunk_samples` mono float32 samples with their wall-clock start times."""
 
     def close(self) -> None:
         pass
