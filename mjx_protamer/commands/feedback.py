@@ -150,7 +150,9 @@ def _finetune(args: argparse.Namespace) -> int:
         try:
             voice = _voice_setup(args)
         except VoiceError as e:
-            return _fail(str(e), e.exit_code)
+            from audio_frontend.errors import AudioDeviceError
+            hint = " (here: --listen-source wav:PATH)" if isinstance(e, AudioDeviceError) else ""
+            return _fail(f"{e}{hint}", e.exit_code)
     ckpt = Path(args.checkpoint)
     if not ckpt.exists():
         return _fail(f"--checkpoint {ckpt}: no such file or directory. Give a pretrain run directory "

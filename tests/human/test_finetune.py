@@ -160,6 +160,18 @@ def test_bad_listen_source_and_missing_wav(tmp_path, capsys):
     assert code == 3 and "none.wav" in capsys.readouterr().err
 
 
+def test_no_microphone_is_a_clear_error(tmp_path, capsys, monkeypatch):
+    import audio_frontend.sources as sources
+    from audio_frontend.errors import AudioDeviceError
+
+    def no_device(device=None):
+        raise AudioDeviceError("no usable audio input device (test)")
+
+    monkeypatch.setattr(sources, "check_input_device", no_device)
+    assert run_main("--feedback", "prosody", "--listen-source", "mic", "--checkpoint", tmp_path) == 4
+    assert "--listen-source wav:PATH" in capsys.readouterr().err
+
+
 def test_corrupt_checkpoint_is_a_clear_error(toy_run, tmp_path, capsys):
     import shutil
 
