@@ -127,3 +127,14 @@ def test_feedback_flag_errors_name_the_problem(tmp_path, capsys):
     assert main(["pretrain", "--config", str(pre), "--feedback", "keyboard", "--out", str(tmp_path / "x")]) == 2
     assert "simulated:keyboard" in capsys.readouterr().err
     assert main(["pretrain", "--config", str(pre), "--feedback-config", str(fb), "--out", str(tmp_path / "y")]) == 2
+
+
+def test_teacher_signals_in_jit():
+    from mjx_protamer.config import ConfigError
+    from mjx_protamer.experiments.feedback_train import _signal_columns
+
+    cols = _signal_columns(("reach", "obs:3", "action:1", "obs_norm:0:2,4:5"), ("distance", "effort", "reach"), 6, 2)
+    assert cols == (("terms", 2), ("obs", 3), ("action", 1), ("obs_norm", (0, 1, 4)))
+    for bad in ("arm_speed", "obs_norm:4:9", "obs:6"):
+        with pytest.raises(ConfigError, match="feedback.teacher.rule"):
+            _signal_columns((bad,), ("distance",), 6, 2)
