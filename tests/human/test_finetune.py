@@ -358,3 +358,17 @@ def test_listener_without_weights_dies_and_the_learner_goes_on(toy_run, tmp_path
     said = "voice listener died with exit code 5 (MissingWeightsError"
     assert text.count(said) == 1 and "training goes on without voice feedback" in text
     assert "[step    4000]" in text and (out / "checkpoints").is_dir()
+
+
+@pytest.mark.parametrize("learner", ["ddpg", "coach"])
+def test_finetune_with_a_simulated_teacher_uses_its_events(toy_run, tmp_path, capsys, learner):
+    rule = "feedback.teacher.rule=[{signal: 'action:0', value: 1.0, above: 0.0}, {signal: 'action:0', value: -1.0, below: 0.0}]"
+    out = tmp_path / learner
+    assert run_main("--learner", learner, "--feedback", "simulated:keyboard", "--checkpoint", toy_run, "--out", out,
+                    "--max-chunks", "20", "--set", rule, "--set", "feedback.teacher.min_gap_steps=10") == 0
+    text = capsys.readouterr().out
+    events = FeedbackLog.read(out / "feedback.jsonl")
+    assert len(events) > 5 and all(e.source == "simulated" for e in events)
+    assert text.count("[event] simulated") == len(events)
+    used = text.count("corrects the window") if learner == "coach" else text.count("credited steps")
+    assert used > 3
