@@ -352,7 +352,10 @@ def _print_outcomes(run, learner: str) -> None:
         if why is not None:
             print(f"{head}: accepted, not used: {why}", flush=True)
         elif learner == "coach":
-            print(f"{head}: accepted, corrects the window before step {got}", flush=True)
+            c = run.learner.config
+            end = got - c.human_delay_steps
+            print(f"{head}: accepted, corrects steps {end - c.window + 1}..{end} (the window "
+                  f"{c.human_delay_steps} steps before step {got})", flush=True)
         else:
             print(f"{head}: accepted, credited steps {min(got.steps)}..{max(got.steps)} (lands on step {got.step})",
                   flush=True)

@@ -370,5 +370,5 @@ def test_finetune_with_a_simulated_teacher_uses_its_events(toy_run, tmp_path, ca
     events = FeedbackLog.read(out / "feedback.jsonl")
     assert len(events) > 5 and all(e.source == "simulated" for e in events)
     assert text.count("[event] simulated") == len(events)
-    used = text.count("corrects the window") if learner == "coach" else text.count("credited steps")
+    used = text.count("accepted, corrects steps") if learner == "coach" else text.count("credited steps")
     assert used > 3
