@@ -38,13 +38,6 @@ class SelfTouchEnv:
                       ctrl=jnp.asarray(self.model.rest_ctrl, jnp.float32),
                       qacc_warmstart=jnp.asarray(self.model.init_warmstart, jnp.float32))
         self.init_data = jax.jit(mjx.forward)(self.mjx_model, d)
-        # The pool of episode starts (model.py), forwarded once: a reset is then a gather.
-        pool = jax.tree.map(lambda x: jnp.broadcast_to(x, (self.config.reset_pool_size,) + x.shape), d)
-        pool = pool.replace(qpos=jnp.asarray(self.model.start_qpos, jnp.float32),
-                            qvel=jnp.asarray(self.model.start_qvel, jnp.float32),
-                            ctrl=jnp.asarray(self.model.start_ctrl, jnp.float32),
-                            qacc_warmstart=jnp.asarray(self.model.start_warmstart, jnp.float32))
-        self.start_data = jax.jit(jax.vmap(mjx.forward, in_axes=(None, 0)))(self.mjx_model, pool)
         # Contact slots are grouped by condim in MJX; each slot's dimension is fixed by the model.
         # Only the self-contact group's slots can touch a hand (when the floor has its own condim).
         contact = self.init_data._impl.contact
@@ -53,6 +46,13 @@ class SelfTouchEnv:
         self._self_slots = (np.arange(len(dim)) if phys.self_condim == phys.floor_condim
                             else np.where(dim == phys.self_condim)[0])
         self._n_pyramid = np.where(dim == 1, 1, 2 * (dim - 1))[self._self_slots]
+        # The pool of episode starts (model.py), forwarded and sensed once: a reset is then a gather.
+        pool = jax.tree.map(lambda x: jnp.broadcast_to(x, (self.config.reset_pool_size,) + x.shape), d)
+        pool = pool.replace(qpos=jnp.asarray(self.model.start_qpos, jnp.float32),
+                            qvel=jnp.asarray(self.model.start_qvel, jnp.float32),
+                            ctrl=jnp.asarray(self.model.start_ctrl, jnp.float32),
+                            qacc_warmstart=jnp.asarray(self.model.start_warmstart, jnp.float32))
+        self._start_states = jax.jit(jax.vmap(lambda d: self._start_state(mjx.forward(self.mjx_model, d))))(pool)
 
     # --- contacts and sensing -------------------------------------------------------------------
     def contacts(self, d: mjx.Data):
@@ -87,16 +87,21 @@ class SelfTouchEnv:
         return obs, terms @ self._weights, metrics
 
     # --- the env API ----------------------------------------------------------------------------
-    def reset(self, rng: jax.Array) -> State:
-        rng, pick = jax.random.split(rng)
-        index = jax.random.randint(pick, (), 0, self.config.reset_pool_size)
-        d = jax.tree.map(lambda x: x[index], self.start_data)
+    def _start_state(self, d: mjx.Data) -> State:
         touch, regions, extended = self.sense(d)
         zero_action = jnp.zeros(self.action_size)
         obs, _, metrics = self._transition(d, touch, regions, extended, touch, regions, zero_action)
         metrics = dict(metrics, reward_terms=jnp.zeros_like(metrics["reward_terms"]), nan_reset=jnp.zeros(()))
-        info = {"prev_touch": touch, "prev_regions": regions, "rng": rng}
+        info = {"prev_touch": touch, "prev_regions": regions, "rng": jnp.zeros((2,), jnp.uint32)}
         return State(data=d, obs=obs, reward=jnp.zeros(()), done=jnp.zeros(()), metrics=metrics, info=info)
+
+    def reset(self, rng: jax.Array) -> State:
+        # The start states (physics, observation, signals) are precomputed: a reset is a gather, so
+        # frequent resets of staggered batched episodes cost next to nothing.
+        rng, pick = jax.random.split(rng)
+        index = jax.random.randint(pick, (), 0, self.config.reset_pool_size)
+        state = jax.tree.map(lambda x: x[index], self._start_states)
+        return state.replace(info=dict(state.info, rng=rng))
 
     def step(self, state: State, action: jax.Array) -> State:
         if action.shape != (self.action_size,):
