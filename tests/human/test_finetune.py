@@ -185,6 +185,8 @@ def test_corrupt_checkpoint_is_a_clear_error(toy_run, tmp_path, capsys):
 
 # ---------------------------------------------------------------- keyboard, live, in a pseudo-terminal
 
+# the child execs at once after the fork (setsid + TIOCSCTTY need preexec_fn), so JAX's threads do not matter
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
 def test_finetune_keyboard_in_a_terminal_confirms_credits_saves_and_loads(toy_run, tmp_path):
     out = tmp_path / "ft"
     p = PtyProc(protamer("finetune", "--feedback", "keyboard", "--checkpoint", toy_run, "--out", out))
@@ -209,6 +211,7 @@ def test_finetune_keyboard_in_a_terminal_confirms_credits_saves_and_loads(toy_ru
     assert cfg.train.num_envs == 1 and step > 0
 
 
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
 def test_finetune_ctrl_c_mid_run_saves_and_exits_130(toy_run, tmp_path):
     out = tmp_path / "ft"
     p = PtyProc(protamer("finetune", "--feedback", "keyboard", "--checkpoint", toy_run, "--out", out))
