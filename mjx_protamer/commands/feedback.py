@@ -20,7 +20,7 @@ Each chunk prints a status line; each key press is confirmed at once and each dr
 what it credited. On exit (q, --seconds, --max-chunks, Ctrl-C) everything is saved into --out:
 DDPG: checkpoints/ + config.yaml (loadable by `protamer eval --checkpoint OUT` and by finetune again),
 reward_model.msgpack; COACH: coach_policy.msgpack; both: feedback.jsonl, feedback_config.yaml.
-Exit codes: 0 normal end, 130 Ctrl-C (after saving), 2 a bad argument, checkpoint or terminal,
+Exit codes: 0 normal end, 130 Ctrl-C / 143 SIGTERM (after saving), 2 a bad argument, checkpoint or terminal,
 the voice front end's codes (3 audio input, 4 audio device) when the audio source is unusable.
 """
 
@@ -311,6 +311,8 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
             _save(run, out, args.learner, saved_config)
             print(f"[finetune] saved {'coach policy' if args.learner == 'coach' else 'checkpoint, reward model'} "
                   f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
+    if stopper.signum is not None:
+        return 128 + stopper.signum  # 130 for Ctrl-C, 143 for SIGTERM
     return 130 if interrupted else 0
 
 
