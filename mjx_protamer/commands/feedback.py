@@ -297,6 +297,10 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                 keys.stop()
             if listener is not None:
                 from audio_frontend.listen import listener_status
+                if listener.is_alive() and args.listen_source.startswith("wav:") and not listener_said:
+                    # A recording ends on its own: give a listener that is still loading (slow on a
+                    # busy machine) a moment to finish or fail, so its outcome is reported.
+                    listener.join(10.0)
                 said = listener_status(listener)
                 if said is not None and not listener_said and listener.exitcode != 0:
                     print(f"[finetune] {said}", flush=True)
