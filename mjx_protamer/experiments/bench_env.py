@@ -19,6 +19,7 @@ Timings are wall-clock on a shared machine: other processes' load shows up in th
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import dataclasses
 import os
 import platform
@@ -236,6 +237,7 @@ def plot_fidelity(fidelity: dict, path: str) -> None:
     ax.set_title("Self-contact under held random targets: fast vs reference physics settings")
     ax.legend()
     fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -288,8 +290,12 @@ def run_env_benchmark(args) -> dict:
     report["contact_fidelity"] = contact_fidelity(fid_eps, fid_steps)
     figure = getattr(args, "figure", None)
     if figure:
-        plot_fidelity(report["contact_fidelity"], figure)
-        report["contact_fidelity_figure"] = figure
+        # A figure that cannot be written must not throw away the measurements: report it instead.
+        try:
+            plot_fidelity(report["contact_fidelity"], figure)
+            report["contact_fidelity_figure"] = figure
+        except OSError as e:
+            report["contact_fidelity_figure_error"] = f"could not write {figure}: {e}"
     report["settings"] = {"steps_per_chunk": steps, "repeats": repeats, "twin_steps": twin_steps, "quick": quick,
                           "physics": dataclasses.asdict(env.config.physics)}
     report["machine"] = {
