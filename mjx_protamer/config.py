@@ -163,8 +163,8 @@ def from_dict(cls: type[T], raw: dict[str, Any] | None) -> T:
     return _build(cls, dict(raw or {}))
 
 
-def load_config(cls: type[T], path: str | Path | None = None, overrides: list[str] | None = None) -> T:
-    """Load `cls` from a YAML file (or its defaults when path is None) with overrides applied."""
+def read_raw(path: str | Path | None = None, overrides: list[str] | None = None) -> dict[str, Any]:
+    """The YAML mapping in `path` ({} when None) with `a.b=value` overrides applied, not yet validated."""
     raw: dict[str, Any] = {}
     if path is not None:
         path = Path(path)
@@ -176,5 +176,9 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: list[st
             raise ConfigError(f"config file {path} is not valid YAML: {e}") from None
         if not isinstance(raw, dict):
             raise ConfigError(f"config file {path} must hold a mapping at the top level")
-    apply_overrides(raw, list(overrides or []))
-    return from_dict(cls, raw)
+    return apply_overrides(raw, list(overrides or []))
+
+
+def load_config(cls: type[T], path: str | Path | None = None, overrides: list[str] | None = None) -> T:
+    """Load `cls` from a YAML file (or its defaults when path is None) with overrides applied."""
+    return from_dict(cls, read_raw(path, overrides))

@@ -88,18 +88,11 @@ class Table2Config:
 
 
 def load_table2_config(path=None, overrides=None, seeds: int | None = None) -> Table2Config:
-    import yaml
-
     from mjx_protamer.agents.ddpg.config import PretrainConfig
-    from mjx_protamer.config import apply_overrides, from_dict
+    from mjx_protamer.config import from_dict, read_raw
     from mjx_protamer.human.tamer_loop import FeedbackConfig
 
-    raw: dict = {}
-    if path is not None:
-        if not Path(path).is_file():
-            raise ConfigError(f"config file {path} does not exist")
-        raw = yaml.safe_load(Path(path).read_text()) or {}
-    apply_overrides(raw, list(overrides or []))
+    raw = read_raw(path, overrides)
     allowed = {"pretrain", "feedback", "batched", "conditions", "seeds", "moving_average"}
     unknown = sorted(set(raw) - allowed)
     if unknown:

@@ -71,16 +71,9 @@ class FeedbackRunConfig:
 
 def load_feedback_config(path=None, overrides=None) -> FeedbackRunConfig:
     """Load a FeedbackRunConfig; the `pretrain` section is a PretrainConfig (DDPG engineer's)."""
-    import yaml
+    from mjx_protamer.config import ConfigError, from_dict, read_raw
 
-    from mjx_protamer.config import ConfigError, apply_overrides, from_dict
-
-    raw: dict = {}
-    if path is not None:
-        if not Path(path).is_file():
-            raise ConfigError(f"config file {path} does not exist")
-        raw = yaml.safe_load(Path(path).read_text()) or {}
-    apply_overrides(raw, list(overrides or []))
+    raw = read_raw(path, overrides)
     unknown = sorted(set(raw) - {"pretrain", "feedback"})
     if unknown:
         raise ConfigError(f"unknown config key(s) {', '.join(unknown)}; allowed keys: feedback, pretrain")
