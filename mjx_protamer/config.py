@@ -72,6 +72,8 @@ def _coerce(value: Any, tp: Any, field: str) -> Any:
     if dataclasses.is_dataclass(tp):
         if isinstance(value, tp):
             return value
+        if isinstance(value, str) and hasattr(tp, "preset"):  # a named preset, e.g. `reward: paper`
+            return tp.preset(value)
         if not isinstance(value, dict):
             raise ConfigError(f"config field '{field}': expected a mapping, got {value!r}")
         return _build(tp, value, prefix=f"{field}.")

@@ -182,12 +182,25 @@ def _load(args, ckpt: Path):
     return load_run(ckpt)
 
 
+def _with_feedback_channel(fb, feedback: str):
+    """Credit (and a simulated teacher) use the delay model of the channel the feedback comes through."""
+    import dataclasses
+
+    from mjx_protamer.human.teachers import with_channel
+
+    kind = {"whisper": "speech", "prosody": "prosody"}.get(feedback)
+    if feedback.startswith("simulated:"):
+        kind = feedback.split(":", 1)[1]
+    return fb if kind is None else dataclasses.replace(fb, teacher=with_channel(fb.teacher, kind))
+
+
 def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
     import dataclasses
 
     from mjx_protamer.human.tamer_loop import load_feedback_config
 
     fb = load_feedback_config(args.config, args.overrides).feedback
+    fb = _with_feedback_channel(fb, args.feedback)
     chunk_steps = max(1, round(args.chunk_ms / 1000.0 / fb.dt))
     out = args.out or Path("runs") / time.strftime("finetune-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)

@@ -119,7 +119,7 @@ class TamerRun:
         history = max(4096, 2 * tc.chunk_steps + int(fc.credit.delay_max_s / fc.dt) + 64)
         self.step_clock = StepClock(fc.dt, capacity=history)
         self.history = StepHistory(history, env.observation_size, env.action_size)
-        self.assigner = CreditAssigner(fc.credit, self.step_clock)
+        self.assigner = CreditAssigner(fc.credit, self.step_clock, fc.teacher.channel)
         self.teacher = None
         if self.simulated:
             kind = feedback.split(":", 1)[1] if ":" in feedback else fc.teacher.channel.kind

@@ -43,6 +43,7 @@ class DDPGConfig:
     # Sample-time reward: alpha * (reward_terms @ env weights) + beta * human_reward_fn(params, obs, action).
     reward_alpha: float = 1.0
     reward_beta: float = 0.1
+    actor_preact_coef: float = 0.0  # penalty on the actor's pre-tanh activations (losses.actor_loss)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -54,6 +55,7 @@ class DDPGConfig:
         check(self.critic_lr > 0, "critic_lr", f"must be > 0, got {self.critic_lr}")
         check(0.0 <= self.gamma < 1.0, "gamma", f"must be in [0, 1), got {self.gamma}")
         check(0.0 < self.tau <= 1.0, "tau", f"must be in (0, 1], got {self.tau}")
+        check(self.actor_preact_coef >= 0, "actor_preact_coef", f"must be >= 0, got {self.actor_preact_coef}")
         check(self.batch_size >= 1, "batch_size", f"must be >= 1, got {self.batch_size}")
         check(self.replay_size >= self.batch_size, "replay_size",
               f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")
@@ -106,10 +108,13 @@ class TrainConfig:
 
 
 def batched_ddpg() -> DDPGConfig:
-    """The batched default's learner: the paper's, with OU sigma 0.3 and tau 0.005. With the paper's sigma 0.6
-    (stationary std 1.14, so most actions saturate) and tau 0.001, batched self-touch training collapses
-    after ~30k env steps (training contact rate 0.7 -> 0.07; test contact rate 0.01)."""
-    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.15, sigma=0.3))
+    """The batched default's learner: the paper's, with tau 0.005 and exploration on a human time scale.
+
+    OU theta 0.01 (correlation time 100 steps = 0.5 s) with sigma 0.042 (stationary std 0.3): the paper's
+    theta 0.15 changes the target every 5 ms step, and stiff 200 Hz servos turn that into 10-20 rad/s of
+    jitter (the movement band is then never met and the critic never sees a slow or frozen arm). With the
+    paper's sigma 0.6 and tau 0.001, batched self-touch training collapses after ~30k env steps."""
+    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042))
 
 
 @dataclass(frozen=True)
