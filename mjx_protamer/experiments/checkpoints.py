@@ -179,7 +179,7 @@ def restore(mngr: ocp.CheckpointManager, step: int, like):
     try:
         restored = mngr.restore(step, args=ocp.args.StandardRestore(abstract))
     except Exception as e:  # orbax/tensorstore raise many types for missing or truncated files
-        first = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
+        first = str(e).strip().splitlines()[0].split(". See full")[0][:160] if str(e).strip() else type(e).__name__
         raise CheckpointDamaged(f"checkpoint {directory} is damaged: its arrays cannot be read ({first}); "
                                 f"{_previous_hint(mngr, step)}") from None
     out = {name: (_lookup(restored, name) if x.size > 0 else _empty(x)) for name, x in like_named.items()}

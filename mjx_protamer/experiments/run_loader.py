@@ -19,6 +19,11 @@ def resolve_checkpoint(path: str | Path) -> tuple[Path, Path, int | None]:
     """(run dir, checkpoints dir, step or None for the latest) from a run dir, its checkpoints dir or a step dir."""
     path = Path(path)
     if not path.exists():
+        if path.name.isdigit() and (path.parent.parent / CONFIG_NAME).is_file():
+            steps = ", ".join(p.name for p in sorted(path.parent.iterdir(), key=lambda p: p.name.zfill(12))
+                              if p.name.isdigit()) if path.parent.is_dir() else ""
+            raise CheckpointError(f"checkpoint step {path.name} does not exist in {path.parent}; "
+                                  + (f"the steps there: {steps}" if steps else "it holds no checkpoint"))
         raise CheckpointError(f"{path}: no such file or directory; give {WHAT}")
     if (path / CONFIG_NAME).is_file():
         return path, path / "checkpoints", None
