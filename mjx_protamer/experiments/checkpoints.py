@@ -17,10 +17,12 @@ the next chunk must not start before the save ends.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import json
 import os
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -176,12 +178,15 @@ def restore(mngr: ocp.CheckpointManager, step: int, like):
         raise CheckpointDamaged(f"checkpoint {directory} is damaged: {e}; {_previous_hint(mngr, step)}") from None
     _check_structure(manifest, like_named, directory)
     abstract = _nested({name: _abstract(x) for name, x in like_named.items()})
+    failure = None
     try:
         restored = mngr.restore(step, args=ocp.args.StandardRestore(abstract))
     except Exception as e:  # orbax/tensorstore raise many types for missing or truncated files
-        first = str(e).strip().splitlines()[0].split(". See full")[0][:160] if str(e).strip() else type(e).__name__
-        raise CheckpointDamaged(f"checkpoint {directory} is damaged: its arrays cannot be read ({first}); "
-                                f"{_previous_hint(mngr, step)}") from None
+        failure = str(e).strip().splitlines()[0].split(". See full")[0][:160] if str(e).strip() else type(e).__name__
+    if failure is not None:
+        _collect_orphaned_reads()
+        raise CheckpointDamaged(f"checkpoint {directory} is damaged: its arrays cannot be read ({failure}); "
+                                f"{_previous_hint(mngr, step)}")
     out = {name: (_lookup(restored, name) if x.size > 0 else _empty(x)) for name, x in like_named.items()}
     host = {name: np.asarray(jax.device_get(x)) for name, x in out.items()}
     if _digest(host) != manifest["sha256"]:
@@ -189,6 +194,24 @@ def restore(mngr: ocp.CheckpointManager, step: int, like):
                                 f"checksum; {_previous_hint(mngr, step)}")
     treedef = jax.tree.structure(like)
     return jax.tree.unflatten(treedef, [out[name] for name in like_named])
+
+
+def _collect_orphaned_reads() -> None:
+    """When one array fails to read, orbax abandons the reads of the others as coroutines that are never
+    awaited; each one's finalisation would print an 'Exception ignored in: <coroutine ...>' block (hundreds
+    for a TrainState). Finalise them now, dropping exactly those reports."""
+    previous = sys.unraisablehook
+
+    def hook(report):
+        code = getattr(report.object, "cr_code", None)
+        if code is None or "orbax" not in code.co_filename:
+            previous(report)
+
+    sys.unraisablehook = hook
+    try:
+        gc.collect()
+    finally:
+        sys.unraisablehook = previous
 
 
 def set_aside(mngr: ocp.CheckpointManager, step: int) -> Path:
