@@ -17,7 +17,10 @@ def evaluate(config, env, actor_params, episodes: int, seed: int) -> dict:
     rollout = make_rollout(env, config.train.episode_length, config.ddpg.actor_hidden)
     keys = jax.random.split(jax.random.PRNGKey(seed), episodes)
     signals = jax.device_get(rollout(actor_params, keys))
-    summary = metrics.summarize(signals["self_contact"], signals["region_mask"], signals["arm_speed"])
+    # env.freeze_speed (rad/s; the toy env scales its speed so that 1 "rad/s" means 0.1 per step) is the
+    # freeze metric's threshold for every env.
+    summary = metrics.summarize(signals["self_contact"], signals["region_mask"], signals["arm_speed"],
+                                freeze_threshold=config.env.freeze_speed)
     returns = np.sum(signals["reward"], axis=1)
     summary["episode_return"] = float(returns.mean())
     summary["per_episode"]["episode_return"] = [float(r) for r in returns]

@@ -120,3 +120,19 @@ def test_the_memory_estimate_is_the_state_size():
     like = jax.eval_shape(lambda: {"replay": jnp.zeros((1000, 6)), "n": jnp.zeros((), jnp.int32)})
     assert memory.tree_bytes(like) == 1000 * 6 * 4 + 4
     assert 0 < memory.host_available_bytes() < 2**50
+
+
+def test_env_freeze_speed_is_the_freeze_metric_threshold(tiny_run):
+    """It was validated but unread (the metric used a hard-coded 1 rad/s)."""
+    import dataclasses
+
+    from mjx_protamer.envs.toy import PointReachEnv
+    from mjx_protamer.experiments.evaluate import evaluate
+
+    config, _, result = tiny_run
+    actor = result["state"].actor_params
+    never = dataclasses.replace(config, env=dataclasses.replace(config.env, freeze_speed=1e-9))
+    always = dataclasses.replace(config, env=dataclasses.replace(config.env, freeze_speed=1e9))
+    env = PointReachEnv(config.toy)
+    assert evaluate(never, env, actor, 2, 0)["freeze_ratio"] < 0.5
+    assert evaluate(always, env, actor, 2, 0)["freeze_ratio"] == 1.0
