@@ -16,7 +16,8 @@ import yaml
 
 from mjx_protamer.config import ConfigError, to_dict
 from mjx_protamer.experiments import checkpoints, memory, metrics, run_log
-from mjx_protamer.experiments.evaluate import CONFIG_NAME, eval_seed, evaluate
+from mjx_protamer.experiments.evaluate import eval_seed, evaluate
+from mjx_protamer.experiments.run_loader import CONFIG_NAME
 
 
 def run_pretrain(
