@@ -3,7 +3,6 @@ YAML 1.2 numbers accepted."""
 
 from __future__ import annotations
 
-
 import pytest
 from reliability_helpers import run_cli
 
