@@ -196,22 +196,40 @@ def restore(mngr: ocp.CheckpointManager, step: int, like):
     return jax.tree.unflatten(treedef, [out[name] for name in like_named])
 
 
+def _from_abandoned_read(report) -> bool:
+    """Whether an unraisable-exception report comes from orbax's abandoned reads: their coroutines, a frame of
+    orbax in the traceback, or tensorstore completing a read in flight after orbax closed its event loop
+    (`call_soon_threadsafe` -> 'Event loop is closed', reported from tensorstore's thread with no object)."""
+    code = getattr(report.object, "cr_code", None)
+    if code is not None and "orbax" in code.co_filename:
+        return True
+    frames = []
+    tb = report.exc_traceback
+    while tb is not None:
+        frames.append(tb.tb_frame.f_code)
+        tb = tb.tb_next
+    if any("orbax" in f.co_filename for f in frames):
+        return True
+    return (report.object is None and isinstance(report.exc_value, RuntimeError)
+            and str(report.exc_value) == "Event loop is closed"
+            and any(f.co_name == "call_soon_threadsafe" for f in frames))
+
+
 def _collect_orphaned_reads() -> None:
     """When one array fails to read, orbax abandons the reads of the others as coroutines that are never
-    awaited; each one's finalisation would print an 'Exception ignored in: <coroutine ...>' block (hundreds
-    for a TrainState). Finalise them now, dropping exactly those reports."""
-    previous = sys.unraisablehook
+    awaited, and tensorstore may still complete some; each would print an 'Exception ignored in: ...' block
+    (hundreds for a TrainState), now or whenever the garbage collector or tensorstore's thread gets to them.
+    From the first damaged checkpoint on, those reports (and only those) are dropped; the coroutines
+    collectable now are finalised at once."""
+    current = sys.unraisablehook
+    if not getattr(current, "drops_orbax_orphans", False):
+        def hook(report, _previous=current):
+            if not _from_abandoned_read(report):
+                _previous(report)
 
-    def hook(report):
-        code = getattr(report.object, "cr_code", None)
-        if code is None or "orbax" not in code.co_filename:
-            previous(report)
-
-    sys.unraisablehook = hook
-    try:
-        gc.collect()
-    finally:
-        sys.unraisablehook = previous
+        hook.drops_orbax_orphans = True
+        sys.unraisablehook = hook
+    gc.collect()
 
 
 def set_aside(mngr: ocp.CheckpointManager, step: int) -> Path:

@@ -60,6 +60,7 @@ CASES = [
 ]
 
 
+@pytest.mark.filterwarnings("error::pytest.PytestUnraisableExceptionWarning")  # orbax's abandoned reads
 @pytest.mark.parametrize("name, damage, says", CASES, ids=[c[0] for c in CASES])
 def test_eval_refuses_a_bad_checkpoint_in_one_line(run_copy, capsys, name, damage, says):
     target = damage(run_copy)
