@@ -14,7 +14,7 @@ from pathlib import Path
 import jax
 import yaml
 
-from mjx_protamer.config import ConfigError, to_dict
+from mjx_protamer.config import ConfigError, read_raw, to_dict
 from mjx_protamer.experiments import checkpoints, memory, metrics, run_log
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate
 from mjx_protamer.experiments.run_loader import CONFIG_NAME
@@ -51,7 +51,7 @@ def run_pretrain(
         if not existing:
             raise ConfigError(f"--resume: {out} holds no checkpoint to continue from; leave out --resume to "
                               f"start a new run there, or give the --out of the run to continue")
-        if config_path.is_file() and yaml.safe_load(config_path.read_text()) != saved:
+        if config_path.is_file() and read_raw(config_path) != saved:
             raise ConfigError(f"--resume: the config differs from the one saved in {config_path}")
     elif existing:
         raise ConfigError(f"{out} already holds a run (checkpoint {existing[-1]}); pass --resume or another --out")

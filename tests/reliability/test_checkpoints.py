@@ -182,3 +182,25 @@ def test_kill_9_mid_run_then_resume_ends_exactly_like_the_uninterrupted_run(tiny
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     rows, skipped = read_rows(out / "metrics.csv")
     assert [r["chunk"] for r in rows] == [1.0, 2.0, 3.0] and skipped == 0
+
+
+def test_resume_skips_a_step_that_only_one_of_two_managers_saved(tmp_path, capsys):
+    """A kill between the train-state save and the feedback-state save of the same chunk: that step is
+    incomplete, so resume takes the previous one where both are intact (and keeps the lone half aside)."""
+    from mjx_protamer.experiments import checkpoints
+
+    main, feedback = checkpoints.manager(tmp_path / "checkpoints"), checkpoints.manager(tmp_path / "checkpoints_fb")
+    for step in (1, 2):
+        checkpoints.save(main, step, {"w": jnp.full(3, float(step))})
+        checkpoints.save(feedback, step, {"ring": jnp.full(2, 10.0 * step)})
+    checkpoints.save(main, 3, {"w": jnp.full(3, 3.0)})  # killed before the feedback save of step 3
+    lines = []
+    step, (w, ring) = checkpoints.restore_newest_intact(
+        [(main, {"w": jnp.zeros(3)}), (feedback, {"ring": jnp.zeros(2)})], lines.append)
+    assert step == 2
+    np.testing.assert_array_equal(w["w"], np.full(3, 2.0))
+    np.testing.assert_array_equal(ring["ring"], np.full(2, 20.0))
+    assert lines[0].startswith("--resume: skipping step 3: checkpoint ") and "is missing" in lines[0]
+    assert lines[1] == "--resume: resuming from step 2, the newest intact checkpoint"
+    assert checkpoints.available_steps(tmp_path / "checkpoints") == [2]  # max_to_keep=2 had dropped 1
+    assert [p.name.split("-")[0] for p in (tmp_path / "checkpoints_damaged").iterdir()] == ["3"]
