@@ -146,7 +146,7 @@ def _eval(args: argparse.Namespace) -> int:
     from mjx_protamer.experiments import metrics
     from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
 
-    # Library chatter on stdout (mujoco.mjx prints "Failed to import warp") must not corrupt --json.
+    # Library chatter on stdout must not corrupt --json (mujoco.mjx's warp notice is already dropped: quiet_mjx).
     with contextlib.redirect_stdout(sys.stderr):
         config, env, state, step = load_run(args.checkpoint)
         seed = eval_seed(config) if args.seed is None else args.seed
