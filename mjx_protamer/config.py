@@ -36,8 +36,9 @@ class _Yaml12Loader(yaml.SafeLoader):
 
 _Yaml12Loader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
 for _first in "-+.0123456789":
-    _Yaml12Loader.yaml_implicit_resolvers[_first] = [
-        (tag, rx) for tag, rx in _Yaml12Loader.yaml_implicit_resolvers.get(_first, []) if tag != "tag:yaml.org,2002:float"]
+    _Yaml12Loader.yaml_implicit_resolvers[_first] = [(tag, rx) for tag, rx in
+                                                     _Yaml12Loader.yaml_implicit_resolvers.get(_first, [])
+                                                     if tag != "tag:yaml.org,2002:float"]
 _Yaml12Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?

@@ -200,7 +200,8 @@ class FeedbackQueue:
         """One "rejected_summary" record for the rejected events not logged one by one since the last drain."""
         with self._unsent.get_lock():
             now = list(self._unsent)
-        new = {k: now[i] - self._unsent_logged[i] for i, k in enumerate(REJECT_KINDS) if now[i] > self._unsent_logged[i]}
+        new = {k: now[i] - self._unsent_logged[i] for i, k in enumerate(REJECT_KINDS)
+               if now[i] > self._unsent_logged[i]}
         if new:
             log.rejected_summary(new, total=sum(now))
             for i in range(len(REJECT_KINDS)):

@@ -165,8 +165,8 @@ def test_kill_9_mid_run_then_resume_ends_exactly_like_the_uninterrupted_run(tiny
     config, _, full = tiny_run
     (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(to_dict(config), sort_keys=False))
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "mjx_protamer.cli", "pretrain", "--config", str(tmp_path / "tiny.yaml"),
-                             "--out", str(out), "--no-progress"], cwd=ROOT, stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen([sys.executable, "-m", "mjx_protamer.cli", "pretrain", "--config",
+                             str(tmp_path / "tiny.yaml"), "--out", str(out), "--no-progress"], cwd=ROOT, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, env={**os.environ, "JAX_PLATFORMS": "cpu"})
     deadline = time.time() + 150
     while not list((out / "checkpoints").glob("*/manifest.json")):
