@@ -157,15 +157,18 @@ def _finetune(args: argparse.Namespace) -> int:
     if not ckpt.exists():
         return _fail(f"--checkpoint {ckpt}: no such file or directory. Give a pretrain run directory "
                      f"(made by `protamer pretrain --out DIR`) or a finetune output directory.")
-    from mjx_protamer.experiments.evaluate import resolve_checkpoint
+    from mjx_protamer.errors import CheckpointError
+    from mjx_protamer.experiments.run_loader import resolve_checkpoint
     try:
         resolve_checkpoint(ckpt)
-    except FileNotFoundError as e:
+    except CheckpointError as e:
         return _fail(f"--checkpoint: {e} (expected DIR/config.yaml and DIR/checkpoints/<step>/)")
 
     print(f"[finetune] loading {ckpt} (the first chunk compiles: this can take a minute or two)", flush=True)
     try:
         loaded = _load(args, ckpt)
+    except CheckpointError as e:
+        return _fail(f"--checkpoint: {e}")
     except (FileNotFoundError, ValueError, KeyError) as e:
         return _fail(f"--checkpoint {ckpt} cannot be loaded: {type(e).__name__}: {e}")
     except Exception as e:  # orbax / msgpack errors of a truncated or foreign checkpoint
@@ -178,7 +181,7 @@ def _finetune(args: argparse.Namespace) -> int:
 
 def _load(args, ckpt: Path):
     """(pretrain config, env, loaded train state, step)."""
-    from mjx_protamer.experiments.evaluate import load_run
+    from mjx_protamer.experiments.run_loader import load_run
     return load_run(ckpt)
 
 

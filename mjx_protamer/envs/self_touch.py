@@ -10,7 +10,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from mujoco import mjx
+from mjx_protamer.quiet_mjx import mjx  # mujoco.mjx, without its "Failed to import warp" notice
 
 from mjx_protamer.envs import body, sensing
 from mjx_protamer.envs.base import State

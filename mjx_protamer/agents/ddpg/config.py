@@ -2,6 +2,7 @@
 
 The defaults of `DDPGConfig` are the paper's reference learner (spec, "The reference learners"): actor and
 critic 400-300, Adam 1e-3 both, gamma 0.99, tau 0.001, batch 64, replay 1e5, OU noise theta 0.15 sigma 0.6.
+Every float is also checked finite by the loader (`mjx_protamer.config`).
 `TrainConfig` says how the learner meets the env: how many envs step together, for how long, how many
 gradient updates per vectorised env step, and how the run is cut into jitted chunks.
 """
@@ -57,6 +58,8 @@ class DDPGConfig:
         check(0.0 < self.tau <= 1.0, "tau", f"must be in (0, 1], got {self.tau}")
         check(self.actor_preact_coef >= 0, "actor_preact_coef", f"must be >= 0, got {self.actor_preact_coef}")
         check(self.batch_size >= 1, "batch_size", f"must be >= 1, got {self.batch_size}")
+        check(self.reward_alpha >= 0.0, "reward_alpha", f"must be >= 0, got {self.reward_alpha}")
+        check(self.reward_beta >= 0.0, "reward_beta", f"must be >= 0, got {self.reward_beta}")
         check(self.replay_size >= self.batch_size, "replay_size",
               f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")
 
@@ -84,7 +87,8 @@ class TrainConfig:
         check(self.total_env_steps >= self.num_envs, "total_env_steps",
               f"must be >= num_envs ({self.num_envs}), got {self.total_env_steps}")
         check(self.warmup_env_steps >= 0, "warmup_env_steps", f"must be >= 0, got {self.warmup_env_steps}")
-        check(self.updates_per_step >= 0, "updates_per_step", f"must be >= 0, got {self.updates_per_step}")
+        check(self.updates_per_step >= 1, "updates_per_step",
+              f"must be >= 1 (0 would only collect data and learn nothing), got {self.updates_per_step}")
         check(self.chunk_steps >= 1, "chunk_steps", f"must be >= 1, got {self.chunk_steps}")
         check(self.checkpoint_every_chunks >= 1, "checkpoint_every_chunks",
               f"must be >= 1, got {self.checkpoint_every_chunks}")
