@@ -134,6 +134,9 @@ class SentimentConfig:
     # disk, else vader).
     kind: Literal["vader", "distilbert", "auto"] = "auto"
     vader_threshold: float = 0.05       # |compound| below this is neutral (0): VADER's own convention
+    # Words VADER's lexicon scores that are neutral in this task: the self-touch task talks about hands
+    # ("hand" is +2.2 in VADER, as in "give me a hand"), so "look at the hand" must not be praise.
+    vader_neutral_words: tuple[str, ...] = ("hand",)
     model: str = "distilbert/distilbert-base-uncased-finetuned-sst-2-english"
     positive_labels: tuple[str, ...] = ("POSITIVE", "LABEL_1", "pos", "positive")
     negative_labels: tuple[str, ...] = ("NEGATIVE", "LABEL_0", "neg", "negative")

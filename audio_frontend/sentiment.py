@@ -15,13 +15,15 @@ class VaderClassifier:
 
     name = "vader"
 
-    def __init__(self, threshold: float = 0.05):
+    def __init__(self, threshold: float = 0.05, neutral_words=()):
         try:
             from vaderSentiment.vaderSentiment import SentimentIntensityAnalyzer
         except ImportError as e:
             raise MissingWeightsError(f"sentiment.kind=vader needs vaderSentiment ({e}); "
                                       f"pip install vaderSentiment==3.3.2 (in the audio extra)") from None
         self._sia = SentimentIntensityAnalyzer()
+        for w in neutral_words:      # task words the lexicon mistakes for sentiment
+            self._sia.lexicon.pop(w.lower(), None)
         self.threshold = threshold
 
     def __call__(self, text: str) -> tuple[str, float]:
@@ -52,10 +54,10 @@ def load_sentiment(cfg, kind: str | None = None):
     """The classifier `sentiment.kind` asks for; "auto" takes DistilBERT when its weights load, else VADER."""
     kind = kind or cfg.kind
     if kind == "vader":
-        return VaderClassifier(cfg.vader_threshold)
+        return VaderClassifier(cfg.vader_threshold, cfg.vader_neutral_words)
     from audio_frontend.models import load_text_classifier, weights_on_disk
     if kind == "auto" and not weights_on_disk(cfg.model):
-        return VaderClassifier(cfg.vader_threshold)
+        return VaderClassifier(cfg.vader_threshold, cfg.vader_neutral_words)
     return PipelineClassifier(load_text_classifier(cfg), cfg.model)
 
 

@@ -80,9 +80,9 @@ def validate_speakers(root: str | Path, cfg, scorers=("prosody", "whisper"), log
     if "whisper" in scorers:
         from audio_frontend.models import load_transcriber, weights_on_disk
         from audio_frontend.rules import RuleLayer
-        from audio_frontend.sentiment import PipelineClassifier, VaderClassifier
+        from audio_frontend.sentiment import PipelineClassifier, load_sentiment
 
-        classifiers = {"whisper+vader": VaderClassifier(cfg.sentiment.vader_threshold)}
+        classifiers = {"whisper+vader": load_sentiment(cfg.sentiment, "vader")}
         if weights_on_disk(cfg.sentiment.model):
             from audio_frontend.models import load_text_classifier
             classifiers["whisper+distilbert"] = PipelineClassifier(load_text_classifier(cfg.sentiment),

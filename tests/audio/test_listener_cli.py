@@ -1,6 +1,5 @@
 """The host process (in-process loop and spawned Process) and the voice commands."""
 
-import argparse
 import json
 import time
 
@@ -11,7 +10,7 @@ import soundfile as sf
 from audio_frontend.synth import with_silence
 from mjx_protamer.human.events import validate_event
 from mjx_protamer.human.queue import FeedbackQueue
-from voice_helpers import SR, voice_config, write_wav
+from voice_helpers import SR, run_cli, voice_config, write_wav
 
 pytestmark = pytest.mark.audio
 
@@ -20,14 +19,6 @@ def two_utterances(speech):
     a = with_silence(speech["good job"], 1.0, 1.0)
     b = with_silence(speech["no"], 0.0, 1.0)
     return np.concatenate([a, b]), (1.0, a.size / SR)
-
-
-def run_cli(*argv):
-    from mjx_protamer.commands import voice
-    p = argparse.ArgumentParser()
-    voice.register(p.add_subparsers())
-    args = p.parse_args(list(argv))
-    return args.handler(args)
 
 
 def test_run_listener_one_event_per_utterance_with_times_and_saved_segments(tiny_models, speech, tmp_path):
