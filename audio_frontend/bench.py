@@ -3,7 +3,9 @@
 Synthesised utterances (espeak-ng + sox) with silence around them are played through an ArraySource at
 real-time speed into the real listener loop (VAD -> scorer -> FeedbackQueue.put). Latency per utterance =
 wall-clock time the event was on the queue minus the wall-clock time the speech ended (last sample above
--60 dBFS), so it includes the VAD's end-of-utterance wait and the scoring. Medians are reported.
+-60 dBFS), so it includes the VAD's end-of-utterance wait and the scoring. Medians are reported, and
+beside them (`latency_from_30db_end_s`) the same from a stricter end of speech: the last 10 ms frame within
+30 dB of the loudest, which excludes espeak's quiet decay and so counts the VAD's hangover in full.
 
 Scorers: `prosody` (offline features, calibrated first on a few synthesised sentences of the same
 voice), `whisper` (packaged faster-whisper tiny.en + rules + VADER), and beside them `prosody_wav2vec2`
@@ -98,11 +100,16 @@ def _measure(cfg, scorer, texts, repeats: int) -> dict:
     from mjx_protamer.human.queue import FeedbackQueue
 
     sr = cfg.audio.sample_rate
-    pieces, ends, t = [], [], 0.0
+    from audio_frontend.labelled import speech_bounds
+
+    pieces, ends, ends30, t = [], [], [], 0.0
     for _ in range(repeats):
         for text, style in texts:
-            x = with_silence(synthesize(text, style, sr), 0.75, 1.25, sr, noise_dbfs=-70.0)
+            speech = synthesize(text, style, sr)
+            x = with_silence(speech, 0.75, 1.25, sr, noise_dbfs=-70.0)
             ends.append(t + speech_end(x[: -int(1.25 * sr)], sr))
+            # the stricter end: the last 10 ms within 30 dB of the loudest (the channel model's criterion)
+            ends30.append(t + 0.75 + speech_bounds(speech, sr)[1])
             pieces.append(x)
             t += x.size / sr
     audio = np.concatenate(pieces)
@@ -114,14 +121,16 @@ def _measure(cfg, scorer, texts, repeats: int) -> dict:
     t0 = time.time() + 0.05
     src.t0 = t0
     run_listener(q, cfg, scorer, src, on_event=lambda ev, ok: arrivals.append((time.time(), ev, ok)), log=None)
-    lat, vad_wait, score_s, values = [], [], [], []
+    lat, lat30, vad_wait, score_s, values = [], [], [], [], []
     for t_arr, ev, ok in arrivals:
         # the utterance this event belongs to: the last speech end before the segment end
         mid = (ev.t_start + ev.t_end) / 2 - t0
-        end = min((e for e in ends if e >= mid - 0.5), default=None)
-        if end is None:
+        i = next((j for j, e in enumerate(ends) if e >= mid - 0.5), None)
+        if i is None:
             continue
+        end = ends[i]
         lat.append(t_arr - (t0 + end))
+        lat30.append(float(t_arr - (t0 + ends30[i])))
         vad_wait.append(ev.t_end - (t0 + end))
         score_s.append(ev.details.get("score_s", float("nan")))
         values.append({"value": ev.value, **{k: ev.details[k] for k in ("transcript", "rule", "valence")
@@ -129,6 +138,8 @@ def _measure(cfg, scorer, texts, repeats: int) -> dict:
     lat = [float(v) for v in lat]
     return {"latency_s": statistics.median(lat) if lat else None,
             "latency_p90_s": float(np.percentile(lat, 90)) if lat else None,
+            "latency_from_30db_end_s": statistics.median(lat30) if lat30 else None,
+            "latency_from_30db_end_p90_s": float(np.percentile(lat30, 90)) if lat30 else None,
             "vad_wait_median_s": statistics.median(vad_wait) if vad_wait else None,
             "score_median_s": statistics.median(score_s) if score_s else None,
             "n_utterances": len(ends), "n_events": len(arrivals), "latencies_s": lat, "events": values,

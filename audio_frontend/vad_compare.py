@@ -82,6 +82,21 @@ def count_errors(segments, truth) -> tuple[int, int]:
     return misses, false
 
 
+def noise_covered(segments, truth, duration_s: float, margin_s: tuple[float, float] = (0.5, 0.75),
+                  step_s: float = 0.01) -> tuple[float, float]:
+    """(seconds covered, seconds in all) of the time away from speech (more than the pre-roll before an utterance and the
+    hangover after it) that segments cover: what an always-on VAD sends to the scorer as if it were speech."""
+    t = np.arange(0.0, duration_s, step_s)
+    near = np.zeros(t.size, bool)
+    for u0, u1 in truth:
+        near |= (t >= u0 - margin_s[0]) & (t < u1 + margin_s[1])
+    covered = np.zeros(t.size, bool)
+    for s in segments:
+        covered |= (t >= s.t_start) & (t < s.t_end)
+    away = ~near
+    return float((covered & away).sum() * step_s), float(away.sum() * step_s)
+
+
 def run_vad_benchmark(args) -> dict:
     from audio_frontend.config import load_voice_config
     from audio_frontend.synth import require_tools
@@ -102,14 +117,18 @@ def run_vad_benchmark(args) -> dict:
         for name, over in VADS.items():
             vcfg = dataclasses.replace(cfg.vad, **over)
             misses = false = n_segs = 0
+            noise_s = away_s = 0.0
             t0 = time.perf_counter()
             for x, truth in noisy:
                 segs = segment_array(x, vcfg, sr, chunk)
                 m, f = count_errors(segs, truth)
                 misses, false, n_segs = misses + m, false + f, n_segs + len(segs)
+                cov_s, all_s = noise_covered(segs, truth, x.size / sr)
+                noise_s, away_s = noise_s + cov_s, away_s + all_s
             audio_s = sum(x.size for x, _ in noisy) / sr
             # segments beyond one per utterance found: noise cut into max-length pieces, split utterances
             row[name] = {"misses": misses, "false_alarms": false, "segments": n_segs,
+                         "noise_s_in_segments": round(noise_s, 2), "noise_s_total": round(away_s, 2),
                          "cpu_s_per_audio_s": (time.perf_counter() - t0) / audio_s}
         result["results"][bg] = row
     return result

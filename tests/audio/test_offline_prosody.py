@@ -126,3 +126,9 @@ def test_features_are_finite_on_speech_and_nan_without_voice():
     g = extract(noise, sr)
     assert np.isnan(g["f0_median_st"]) and np.isfinite(g["intensity_db"])
     assert all(np.isnan(v) for v in extract(np.zeros(sr, np.float32), sr).values())
+
+
+def test_listen_uncalibrated_is_refused_for_the_feature_scorer(small_set, capsys):
+    wav = next((small_set / "en-us" / "test" / "pos").glob("*.wav"))
+    assert run_cli("listen", "--wav", str(wav), "--uncalibrated") == 6
+    assert "prosody.kind=wav2vec2 only" in capsys.readouterr().err

@@ -138,3 +138,7 @@ def test_vad_benchmark_counts_misses_and_false_alarms():
     # one segment per utterance but the third is missed; a segment over pure noise is a false alarm
     assert count_errors([seg(0.8, 2.2), seg(3.9, 5.3), seg(6.0, 6.8)], truth) == (1, 1)
     assert count_errors([], truth) == (3, 0)
+    from audio_frontend.vad_compare import noise_covered
+    # away from speech: 0-0.5, 2.75-3.5, 5.75-7.5, 9.75-10 s = 3.25 s; the 6.0-6.8 segment covers 0.8 s of it
+    covered, away = noise_covered([seg(0.8, 2.2), seg(3.9, 5.3), seg(6.0, 6.8)], truth, 10.0)
+    assert covered == pytest.approx(0.8, abs=0.02) and away == pytest.approx(3.25, abs=0.02)
