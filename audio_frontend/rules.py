@@ -77,7 +77,8 @@ class RuleLayer:
         if lab in self.negative_labels:
             return -1.0
         raise ValueError(f"sentiment label {label!r} is neither positive {sorted(self.positive_labels)} nor "
-                         f"negative {sorted(self.negative_labels)} nor {NEUTRAL_LABEL}; set sentiment.positive_labels / negative_labels")
+                         f"negative {sorted(self.negative_labels)} nor {NEUTRAL_LABEL}; "
+                         f"set sentiment.positive_labels / negative_labels")
 
     def decide(self, transcript: str, classify: Callable[[str], tuple[str, float]] | None) -> RuleDecision:
         words = words_of(transcript)

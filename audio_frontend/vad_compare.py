@@ -84,8 +84,8 @@ def count_errors(segments, truth) -> tuple[int, int]:
 
 def noise_covered(segments, truth, duration_s: float, margin_s: tuple[float, float] = (0.5, 0.75),
                   step_s: float = 0.01) -> tuple[float, float]:
-    """(seconds covered, seconds in all) of the time away from speech (more than the pre-roll before an utterance and the
-    hangover after it) that segments cover: what an always-on VAD sends to the scorer as if it were speech."""
+    """(seconds covered, seconds in all) of the time away from speech (more than the pre-roll before an
+    utterance and the hangover after it) that segments cover: what an always-on VAD sends to the scorer as if it were speech."""
     t = np.arange(0.0, duration_s, step_s)
     near = np.zeros(t.size, bool)
     for u0, u1 in truth:

@@ -80,7 +80,8 @@ def labelled_dir(tmp_path, speech):
 
 
 def test_validate_voice_reports_accuracy_confusion_and_bad_files(tiny_models, labelled_dir, capsys):
-    rc = run_cli("validate-voice", str(labelled_dir), "--json", "--set", "prosody.kind=wav2vec2", "--set", f"prosody.model={tiny_models['prosody_hap']}")
+    w2v = ["--set", "prosody.kind=wav2vec2", "--set", f"prosody.model={tiny_models['prosody_hap']}"]
+    rc = run_cli("validate-voice", str(labelled_dir), "--json", *w2v)
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     # the tiny model always hears 'hap': positives right, negatives wrong
@@ -89,7 +90,7 @@ def test_validate_voice_reports_accuracy_confusion_and_bad_files(tiny_models, la
     assert out["n_errors"] == 1 and out["n_scored"] == 6 and out["mean_latency_s"] > 0
     assert any("broken.wav" in r["file"] and "not a readable" in r["error"] for r in out["rows"])
     assert out["skipped_unlabelled"][0].endswith("unlabelled.wav")
-    rc = run_cli("validate-voice", str(labelled_dir), "--set", "prosody.kind=wav2vec2", "--set", f"prosody.model={tiny_models['prosody_hap']}")
+    rc = run_cli("validate-voice", str(labelled_dir), *w2v)
     table = capsys.readouterr().out
     assert "sign accuracy: 0.500 over 6 signed recordings (1 unusable)" in table and "outcomes" in table
 
@@ -120,10 +121,11 @@ def test_listen_command_on_a_wav_and_missing_calibration(tiny_models, speech, tm
     x, _ = two_utterances(speech)
     wav = write_wav(tmp_path / "session.wav", x)
     model = f"prosody.model={tiny_models['prosody_hap']}"
-    rc = run_cli("listen", "--wav", str(wav), "--set", "prosody.kind=wav2vec2", "--set", model, "--set", f"prosody.calibration_path={tmp_path / 'no.json'}")
+    rc = run_cli("listen", "--wav", str(wav), "--set", "prosody.kind=wav2vec2", "--set", model,
+                 "--set", f"prosody.calibration_path={tmp_path / 'no.json'}")
     assert rc == 6 and "protamer calibrate" in capsys.readouterr().err
-    rc = run_cli("listen", "--wav", str(wav), "--set", "prosody.kind=wav2vec2", "--set", model, "--set", "prosody.tau=0.5",
-                 "--save-segments", str(tmp_path / "segs"), "--log", str(tmp_path / "fb.jsonl"))
+    rc = run_cli("listen", "--wav", str(wav), "--set", "prosody.kind=wav2vec2", "--set", model,
+                 "--set", "prosody.tau=0.5", "--save-segments", str(tmp_path / "segs"), "--log", str(tmp_path / "fb.jsonl"))
     assert rc == 0
     events = [json.loads(line_) for line_ in capsys.readouterr().out.splitlines()]
     assert len(events) == 2 and {e["source"] for e in events} == {"prosody"}
