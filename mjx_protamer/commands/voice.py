@@ -259,7 +259,8 @@ def register(subparsers) -> None:
     p.add_argument("--save-segments", default=None, metavar="DIR", help="save each scored segment as WAV here")
     p.add_argument("--log", default=None, metavar="FILE", help="also append events to this JSONL feedback log")
     p.add_argument("--max-events", type=int, default=None, help="stop after this many utterances")
-    p.add_argument("--uncalibrated", action="store_true", help="prosody without calibration (tau = 1)")
+    p.add_argument("--uncalibrated", action="store_true",
+                   help="prosody.kind=wav2vec2 without calibration (tau = 1); the feature scorer always needs one")
     p.set_defaults(handler=cmd_listen)
 
     p = subparsers.add_parser("calibrate", help="per-user prosody calibration: the user's model and tau",
