@@ -21,7 +21,9 @@ what it credited. On exit (q, --seconds, --max-chunks, Ctrl-C) everything is sav
 DDPG: checkpoints/ + config.yaml (loadable by `protamer eval --checkpoint OUT` and by finetune again),
 reward_model.msgpack; COACH: coach_policy.msgpack; both: feedback.jsonl, feedback_config.yaml.
 Exit codes: 0 normal end, 130 Ctrl-C / 143 SIGTERM (after saving), 2 a bad argument, checkpoint or terminal,
-the voice front end's codes (3 audio input, 4 audio device) when the audio source is unusable.
+the voice front end's codes (3 audio input, 4 audio device, 5 missing weights, 6 calibration) when the audio
+source, weights or calibration are unusable (checked before loading), or, at the end of a session that went on
+without it, when the voice listener died.
 """
 
 from __future__ import annotations
@@ -149,6 +151,9 @@ def _finetune(args: argparse.Namespace) -> int:
         from audio_frontend.errors import VoiceError
         try:
             voice = _voice_setup(args)
+            from audio_frontend.preflight import check_voice_feedback  # calibration, weights: fail before loading
+            print("[finetune] voice: " + "; ".join(check_voice_feedback(voice[0], args.feedback, args.keywords_only)),
+                  flush=True)
         except VoiceError as e:
             from audio_frontend.errors import AudioDeviceError
             hint = " (here: --listen-source wav:PATH)" if isinstance(e, AudioDeviceError) else ""
@@ -242,7 +247,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                      checkpoint_step=int(step), chunk_steps=chunk_steps, dt=fb.dt)
 
     keys = listener = stop_event = None
-    listener_said = wav_over = False
+    listener_said = wav_over = listener_died = False
     interrupted = False
     with _Stopper() as stopper:
         try:
@@ -320,6 +325,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                 said = listener_status(listener)
                 if said is not None and not listener_said and listener.exitcode != 0:
                     print(f"[finetune] {said}", flush=True)
+                listener_died = listener.exitcode not in (None, 0)  # before we stop it ourselves
                 stop_event.set()
                 listener.join(2.0)
                 if listener.is_alive():
@@ -333,6 +339,10 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                   f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
     if stopper.signum is not None:
         return 128 + stopper.signum  # 130 for Ctrl-C, 143 for SIGTERM
+    if listener_died and not interrupted:  # the run went on without voice feedback: not a success
+        print(f"[finetune] exit code {max(listener.exitcode, 1)}: the voice listener died during the session "
+              f"(see above); everything up to then is saved", flush=True)
+        return max(listener.exitcode, 1)
     return 130 if interrupted else 0
 
 
