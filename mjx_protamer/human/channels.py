@@ -8,12 +8,18 @@ A feedback about the step shown at time t starts (key press onset, utterance ons
 delay ~ max(delay_min_s, Normal(delay_mean_s, delay_std_s)); an utterance lasts duration_s; the pipeline
 (VAD end-of-speech, transcription or scoring) adds latency_s before the event reaches the learner's queue.
 
-Sources of the presets:
-- keyboard: simple visual reaction time to a judged event, 0.35 +- 0.1 s (human reaction-time literature;
-  Deep TAMER's own analysis puts most key presses 0.2-1 s after the event); no utterance, no pipeline.
-- prosody, speech: reaction to onset of speech is slower than a key press (0.6 / 0.8 s); utterance length and
-  pipeline latency are the medians measured on our voice front end (`protamer validate-voice --json` on
-  synthesised speech, docs/results/voice_channels.json) where that file exists, else the values below.
+Sources of the presets (each number is an assumption from the literature or a measurement of ours):
+- reaction delay (delay_mean/std/min_s), all channels: assumed, from human reaction-time studies (a key press
+  to a judged event 0.35 +- 0.1 s; starting to speak is slower, 0.6-0.8 s). No human was measured here.
+- utterance length (duration_s) and pipeline latency (latency_s: end of speech to event on the queue, VAD
+  hangover included) of prosody and speech: medians measured on our voice front end,
+  docs/results/voice_channels.json (`protamer validate-voice DIR --per-speaker --scorer both` on the
+  `protamer synth-voice` set: 6 espeak-ng voices, 168 signed test utterances, unseen sentences).
+- prosody noise: the offline prosody scorer's measured sign accuracy 0.970 means P(sign flip) = 0.030; with
+  value tanh(gain * score + N(0, noise_std)) and gain 2 that is noise_std = 2 / z(0.970) = 1.06.
+- speech confusion: the measured outcome rates of Whisper tiny.en + rules + VADER (rows intended +1, 0, -1;
+  columns recognised +1, 0, -1; the 0 row pools neutral sentences and fillers).
+Synthesised voices are not real recordings: real speech will differ, and a person's own delays more so.
 """
 
 from __future__ import annotations
@@ -29,11 +35,15 @@ from mjx_protamer.config import check
 KINDS = ("keyboard", "prosody", "speech")
 
 PRESETS = {
-    # reaction delay mean/std/min (s), utterance duration (s), processing latency (s)
-    "keyboard": dict(delay_mean_s=0.35, delay_std_s=0.1, delay_min_s=0.15, duration_s=0.0, latency_s=0.0),
-    "prosody": dict(delay_mean_s=0.6, delay_std_s=0.2, delay_min_s=0.25, duration_s=0.8, latency_s=0.3),
-    "speech": dict(delay_mean_s=0.8, delay_std_s=0.25, delay_min_s=0.3, duration_s=1.0, latency_s=1.2),
+    # reaction delay mean/std/min (s), utterance duration (s), processing latency (s), prosody noise, speech confusion
+    "keyboard": dict(delay_mean_s=0.35, delay_std_s=0.1, delay_min_s=0.15, duration_s=0.0, latency_s=0.0,
+                     noise_std=0.0, confusion=(1, 0, 0, 0, 1, 0, 0, 0, 1)),
+    "prosody": dict(delay_mean_s=0.6, delay_std_s=0.2, delay_min_s=0.25, duration_s=0.87, latency_s=0.365,
+                    noise_std=1.06, confusion=(1, 0, 0, 0, 1, 0, 0, 0, 1)),
+    "speech": dict(delay_mean_s=0.8, delay_std_s=0.25, delay_min_s=0.3, duration_s=0.87, latency_s=1.024,
+                   noise_std=0.0, confusion=(70 / 84, 13 / 84, 1 / 84, 9 / 36, 25 / 36, 2 / 36, 7 / 84, 12 / 84, 65 / 84)),
 }
+MEASURED_IN = "docs/results/voice_channels.json"  # where the prosody and speech measurements come from
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,16 +55,18 @@ class ChannelConfig:
     duration_s: float | None = None  # key press 0; an utterance's length (t_end - t_start)
     latency_s: float | None = None  # processing after t_end before the event reaches the queue
     gain: float = 2.0  # prosody: value = tanh(gain * score + noise)
-    noise_std: float = 0.5  # prosody
-    # speech: P(recognised | intended), rows intended (+1, 0, -1), columns recognised (+1, 0, -1)
-    confusion: tuple[float, ...] = (0.85, 0.10, 0.05, 0.10, 0.80, 0.10, 0.05, 0.10, 0.85)
+    noise_std: float | None = None  # prosody; None: the kind's preset
+    # speech: P(recognised | intended), rows intended (+1, 0, -1), columns recognised (+1, 0, -1); None: preset
+    confusion: tuple[float, ...] | None = None
 
     def validate(self) -> None:
-        check(len(self.confusion) == 9, "confusion", f"needs 9 entries (3x3), got {len(self.confusion)}")
-        for r in range(3):
-            row = self.confusion[3 * r:3 * r + 3]
-            check(min(row) >= 0 and abs(sum(row) - 1.0) < 1e-6, "confusion", f"row {r} must be a distribution, got {row}")
-        check(self.noise_std >= 0, "noise_std", f"must be >= 0, got {self.noise_std}")
+        if self.confusion is not None:
+            check(len(self.confusion) == 9, "confusion", f"needs 9 entries (3x3), got {len(self.confusion)}")
+            for r in range(3):
+                row = self.confusion[3 * r:3 * r + 3]
+                check(min(row) >= 0 and abs(sum(row) - 1.0) < 1e-6, "confusion",
+                      f"row {r} must be a distribution, got {row}")
+        check(self.noise_std is None or self.noise_std >= 0, "noise_std", f"must be >= 0, got {self.noise_std}")
         for name in ("delay_mean_s", "delay_std_s", "delay_min_s", "duration_s", "latency_s"):
             v = getattr(self, name)
             check(v is None or v >= 0, name, f"must be >= 0, got {v}")
@@ -62,6 +74,10 @@ class ChannelConfig:
     def get(self, name: str) -> float:
         v = getattr(self, name)
         return float(PRESETS[self.kind][name] if v is None else v)
+
+    @property
+    def confusion_matrix(self) -> tuple[float, ...]:
+        return tuple(PRESETS[self.kind]["confusion"] if self.confusion is None else self.confusion)
 
     @property
     def arrival_offset_s(self) -> float:

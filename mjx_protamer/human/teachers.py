@@ -19,10 +19,11 @@ Giving model
 
 Channels (per modality)
     keyboard: exact +-1, fast (0.35 +- 0.1 s reaction, no processing latency);
-    prosody: continuous, noisy: tanh(gain * score + Normal(0, noise_std)) (0.6 s reaction, 0.8 s
-        utterance, 0.3 s model latency);
+    prosody: continuous, noisy: tanh(gain * score + Normal(0, noise_std)) (0.6 s reaction, 0.87 s
+        utterance, 0.37 s pipeline latency);
     speech: +1 / 0 / -1 through a confusion matrix (rows intended +1/0/-1, columns recognised), longer
-        latency (0.8 s reaction, 1.0 s utterance, 1.2 s transcription).
+        latency (0.8 s reaction, 0.87 s utterance, 1.02 s transcription).
+    The numbers and their sources (measured on our voice pipelines, or assumed) are in `channels.py`.
 
 Two variants share `teacher_step`:
 - `batched_teacher`: jitted `lax.scan` over a chunk of steps for a batch of envs, one teacher per env;
@@ -156,9 +157,9 @@ def teacher_step(config: TeacherConfig, dt: float, state: TeacherState, signals:
     if ch.kind == "keyboard":
         value = intended
     elif ch.kind == "prosody":
-        value = jnp.tanh(ch.gain * intended * jnp.abs(score) + ch.noise_std * jax.random.normal(k_noise))
+        value = jnp.tanh(ch.gain * intended * jnp.abs(score) + ch.get("noise_std") * jax.random.normal(k_noise))
     else:  # speech: intended +1 -> row 0, 0 -> row 1, -1 -> row 2; recognised column c -> value 1 - c
-        confusion = jnp.asarray(ch.confusion, jnp.float32).reshape(3, 3)
+        confusion = jnp.asarray(ch.confusion_matrix, jnp.float32).reshape(3, 3)
         row = (1 - intended).astype(jnp.int32)
         value = 1.0 - jax.random.categorical(k_noise, jnp.log(confusion[row] + 1e-12)).astype(jnp.float32)
     delay = jnp.maximum(ch.get("delay_min_s"),
