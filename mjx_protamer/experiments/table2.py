@@ -196,7 +196,8 @@ def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untraine
     sig, score, r_hat, r_hat0 = jax.device_get(jax.vmap(run)(actor_params, rm_params, untrained_params, keys))
     out = []
     for i in range(len(cfg.seeds)):
-        ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i])
+        ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i],
+                         freeze_threshold=pre.env.freeze_speed)
         returns = np.sum(sig["reward"][i], axis=1)
         ev["episode_return"] = float(returns.mean())
         ev["per_episode"]["episode_return"] = [float(r) for r in returns]

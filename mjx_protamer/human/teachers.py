@@ -5,10 +5,10 @@ There is no human in CI; a simulated teacher stands in for one, reproducibly (se
 Scoring rule (hidden from the learner)
     A list of clauses over named per-step signals. A signal is a reward term of the env (by name, e.g.
     "region", "contact", "movement", "joint_limit"), a per-step metric (e.g. "self_contact", "arm_speed"),
-    or "obs:i" / "action:i". A clause fires when its signal is above `above` and below `below` for
-    `sustain` consecutive steps; the step's score is the clipped sum of the fired clauses' values.
-    The default rule (self-touch): approve a new region (+1) and sustained contact (+0.6 after 0.1 s),
-    disapprove freezing or flailing (movement penalty for 0.2 s, -1) and pushing joint limits (-0.7).
+    "obs:i" / "action:i", or "obs_norm:a:b[,c:d]" (the L2 norm of obs slices). A clause fires when its signal
+    is above `above` and below `below` for `sustain` consecutive steps; the step's score is the clipped sum
+    of the fired clauses' values. The default rule (self-touch, `SELF_TOUCH_RULE`): approve touching with
+    both hands, disapprove a freeze; see there why it is built that way.
 
 Giving model
     A step whose |score| >= threshold is eligible; the teacher gives with probability `give_rate`, never
@@ -76,14 +76,8 @@ SELF_TOUCH_RULE = (
     Clause("obs_norm:26:52", 0.5, above=0.05, sustain=20),  # right hand or fingers touching, held 0.1 s
     Clause("obs_norm:64:68,70:74", -1.0, below=0.5, sustain=60),  # arms frozen (< 0.5 rad/s) for 0.3 s
 )
-# The rule of the first version, on reward terms (kept for comparison, `rule: legacy` is not a preset: copy it):
-# the region onset it approves lasts one step and the joint-limit clause was true on 100% of training steps.
-LEGACY_RULE = (
-    Clause("region", 1.0, above=0.0),
-    Clause("contact", 0.6, above=0.05, sustain=20),
-    Clause("movement", -1.0, below=-0.25, sustain=40),
-    Clause("joint_limit", -0.7, below=-0.05),
-)
+# (The first version's rule read reward terms: a region onset, which lasts one step, and the joint-limit
+# term, which was active on 100% of training steps; a reward model could not learn it: issue 8.)
 
 @dataclasses.dataclass(frozen=True)
 class TeacherConfig:
