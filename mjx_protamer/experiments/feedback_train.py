@@ -8,12 +8,12 @@
 2. the chunk's steps of every env are read back from the replay rows it wrote
    (row `ptr + i * num_envs + b` for iteration i, env b); the teacher signals are reward terms by name
    (or `obs:i` / `action:i`);
-3. one simulated teacher per env (`teachers.teacher_step`, the same core as the host teacher) scores the
+3. one simulated teacher per env (`teachers.batched_teacher`, on the same core as the host teacher) scores the
    steps; feedback reaches the learner at arrival step = judged step + (reaction delay + utterance +
    processing latency) / dt, through a pending ring;
-4. credit by lag from the arrival step (`credit.lag_weights`: the authors' 15-step window or Deep TAMER's
-   Uniform[0.2, 4.0] s time window): for each event `rows_per_event` lags are drawn in proportion to their
-   credit weight (a Monte-Carlo estimate of the weighted loss: a time window spans 760 steps at 200 Hz) and
+4. credit by lag from the arrival step (`credit.lag_weights`: by default the channel's reaction-delay
+   distribution; the authors' 15-step window and Deep TAMER's Uniform[0.2, 4.0] s stay selectable): for
+   each event `rows_per_event` lags are drawn in proportion to their credit weight (a Monte-Carlo estimate of the weighted loss: a time window spans 760 steps at 200 Hz) and
    the (obs, action) of those steps are gathered *from the DDPG replay*, so windows reaching into earlier
    chunks are credited too (up to replay capacity / num_envs steps back);
 5. the rows go to the device feedback ring (1e4 rows, `batched.ring_add`) and the reward model takes
@@ -39,11 +39,11 @@ import optax
 from flax import struct
 
 from mjx_protamer.config import ConfigError, check
-from mjx_protamer.human.batched import FeedbackRing, ring_add, ring_init
+from mjx_protamer.human.batched import FeedbackRing, draw_credited_steps, reward_model_updates, ring_add, ring_init
 from mjx_protamer.human.credit import CreditConfig, lag_weights
-from mjx_protamer.human.reward_model import RewardMLP, reward_fn, weighted_loss
-from mjx_protamer.human.teachers import (TeacherConfig, TeacherState, max_delay_steps, obs_norm_indices, teacher_init,
-                                         teacher_step, with_channel)
+from mjx_protamer.human.reward_model import RewardMLP, reward_fn
+from mjx_protamer.human.teachers import (BatchedTeacherState, TeacherConfig, batched_teacher, batched_teacher_init,
+                                         obs_norm_indices, with_channel)
 
 KINDS = ("keyboard", "prosody", "speech")
 
@@ -90,10 +90,7 @@ class FeedbackParams(NamedTuple):
 
 @struct.dataclass
 class FeedbackState:
-    teacher: TeacherState  # (B, ...)
-    pending_value: jax.Array  # (B, D)
-    pending_valid: jax.Array  # (B, D) bool
-    pending_about: jax.Array  # (B, D) int32: global step judged
+    teacher: BatchedTeacherState  # one teacher per env and its pending ring of feedback not yet arrived
     rm_params: Any
     rm_opt_state: Any
     ring: FeedbackRing
@@ -159,8 +156,6 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     cols = _signal_columns(fc.teacher.signals, term_names, obs_size, act_size)
     dt = fc.dt
     kind_cfgs = [with_channel(fc.teacher, k) for k in KINDS]
-    extras = jnp.asarray([c.channel.get("duration_s") + c.channel.get("latency_s") for c in kind_cfgs])
-    D = max(max_delay_steps(c, dt) for c in kind_cfgs)
     L = max(len(lag_weights(dataclasses.replace(fc.credit, scheme=s), dt, c.channel))
             for s in ("channel", "step_window", "time_window") for c in kind_cfgs)
     teach_envs = batched.teach_envs or B
@@ -192,46 +187,9 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         key = jax.random.fold_in(jax.random.PRNGKey(seed), 0x7A3E)
         k_net, k_run = jax.random.split(key)
         p = net.init(k_net, jnp.zeros((1, obs_size)), jnp.zeros((1, act_size)))
-        t = teacher_init(fc.teacher)
         return FeedbackState(
-            teacher=jax.tree.map(lambda x: jnp.broadcast_to(x, (B, *x.shape)), t),
-            pending_value=jnp.zeros((B, D)), pending_valid=jnp.zeros((B, D), bool),
-            pending_about=jnp.zeros((B, D), jnp.int32), rm_params=p, rm_opt_state=opt.init(p),
+            teacher=batched_teacher_init(kind_cfgs, B, dt), rm_params=p, rm_opt_state=opt.init(p),
             ring=ring_init(rmc.buffer_size, obs_size, act_size), rng=k_run, totals=jnp.zeros((5,)))
-
-    def teach(fs: FeedbackState, fp: FeedbackParams, signals, step0, key):
-        """signals (T, B, C) -> fs, value/valid/about/score (T, B), with the channel chosen by fp.kind."""
-        extra = extras[fp.kind]
-        rows = jnp.arange(B)
-
-        def body(carry, xs):
-            teacher, pv, pm, pa = carry
-            sig, k, step = xs
-            keys = jax.random.split(k, B)
-            decs = [jax.vmap(lambda ts, x, kk, c=c: teacher_step(c, dt, ts, x, kk))(teacher, sig, keys)
-                    for c in kind_cfgs]
-            new_teacher = decs[0][0]  # the teacher state does not depend on the channel
-            value = jnp.stack([d[1].value for d in decs])[fp.kind]
-            delay = jnp.stack([d[1].delay_s for d in decs])[fp.kind]
-            give, score = decs[0][1].give, decs[0][1].score
-            give = give & (fp.teach > 0) & (rows < teach_envs)
-            lag = jnp.clip(jnp.round((delay + extra) / dt).astype(jnp.int32), 1, D - 1)
-            slot = (step + lag) % D
-            write = give & ~pm[rows, slot]  # a slot already taken keeps its feedback
-            pv = pv.at[rows, slot].set(jnp.where(write, value, pv[rows, slot]))
-            pm = pm.at[rows, slot].set(write | pm[rows, slot])
-            pa = pa.at[rows, slot].set(jnp.where(write, step, pa[rows, slot]))
-            now = step % D
-            out = (jnp.where(pm[:, now], pv[:, now], 0.0), pm[:, now], pa[:, now], score)
-            pm = pm.at[:, now].set(False)
-            return (new_teacher, pv, pm, pa), out
-
-        steps = step0 + jnp.arange(T, dtype=jnp.int32)
-        carry = (fs.teacher, fs.pending_value, fs.pending_valid, fs.pending_about)
-        (teacher, pv, pm, pa), (value, valid, about, score) = jax.lax.scan(
-            body, carry, (signals, jax.random.split(key, T), steps))
-        return fs.replace(teacher=teacher, pending_value=pv, pending_valid=pm, pending_about=pa), \
-            value, valid, about, score
 
     def chunk(ts, fs: FeedbackState, fp: FeedbackParams):
         ptr0, it0 = ts.replay.ptr, ts.iteration
@@ -242,43 +200,22 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         obs, action, terms = data.obs[rows], data.action[rows], data.reward_terms[rows]
         signals = rule_signals(cols, obs, action, terms)
         rng, k_teach, k_lag, k_fresh = jax.random.split(fs.rng, 4)
-        fs, value, valid, about, score = teach(fs, fp, signals, it0, k_teach)
+        active = (fp.teach > 0) & (jnp.arange(B) < teach_envs)
+        teacher, out = batched_teacher(kind_cfgs, dt, fs.teacher, signals, k_teach, kind=fp.kind, active=active)
+        fs = fs.replace(teacher=teacher)
+        value, valid, about, score = out["value"], out["valid"], out["about"], out["score"]
 
         # credit: K lags per event drawn by weight; rows gathered from the replay (earlier chunks too)
-        n_events = jnp.sum(valid)
-        t_idx, b_idx = jnp.nonzero(valid, size=E, fill_value=0)
-        present = jnp.arange(E) < n_events
-        logw = jnp.log(jnp.maximum(fp.lag_w, 0.0) + 1e-30) + jnp.where(fp.lag_w > 0, 0.0, -1e30)
-        lags = jax.random.categorical(k_lag, logw, shape=(E, K))
-        rel = t_idx[:, None] - lags  # step relative to the chunk start
-        ok = present[:, None] & (it0 + rel >= 0) & (rel >= -back_limit) & (jnp.sum(fp.lag_w) > 0)
+        rel, b_idx, ok, target, n_events = draw_credited_steps(value, valid, fp.lag_w, k_lag, E, K)
+        ok = ok & (it0 + rel >= 0) & (rel >= -back_limit)
         r = jnp.mod(ptr0 + rel * B + b_idx[:, None], cap).reshape(-1)
         w = ok.astype(jnp.float32).reshape(-1)
-        h = jnp.broadcast_to(value[t_idx, b_idx][:, None], (E, K)).reshape(-1)
+        h = target.reshape(-1)
         c_obs, c_act = data.obs[r], data.action[r]
         ring = ring_add(fs.ring, c_obs, c_act, w, h)
-
-        def sgd(carry, xs):
-            p, o = carry
-            k, fresh = xs
-            kf, kr = jax.random.split(k)
-            fi = jax.random.categorical(kf, jnp.where(w > 0, 0.0, -1e30), shape=(rmc.batch_size,))
-            ri = jax.random.randint(kr, (rmc.batch_size,), 0, jnp.maximum(ring.size, 1))
-            bo = jnp.where(fresh, c_obs[fi], ring.obs[ri])
-            ba = jnp.where(fresh, c_act[fi], ring.action[ri])
-            bw = jnp.where(fresh, w[fi], ring.weight[ri] * (ring.size >= min(rmc.replay_min_rows, rmc.buffer_size)))
-            bh = jnp.where(fresh, h[fi], ring.target[ri])
-            loss, g = jax.value_and_grad(weighted_loss)(p, apply, bo, ba, bw, bh)
-            u, o = opt.update(g, o, p)
-            live = jnp.sum(bw) > 0
-            p = jax.tree.map(lambda a, b: jnp.where(live, a, b), optax.apply_updates(p, u), p)
-            o = jax.tree.map(lambda a, b: jnp.where(live, a, b), o, carry[1])
-            return (p, o), (loss, live)
-
-        n_up = max(n_fresh + n_replay, 1)
-        fresh = jnp.arange(n_up) < max(n_fresh, n_up - n_replay)
-        (p, o), (losses, live) = jax.lax.scan(sgd, (fs.rm_params, fs.rm_opt_state),
-                                              (jax.random.split(k_fresh, n_up), fresh))
+        p, o, losses, live = reward_model_updates(apply, opt, fs.rm_params, fs.rm_opt_state, ring,
+                                                  (c_obs, c_act, w, h), k_fresh, n_fresh, n_replay,
+                                                  rmc.batch_size, rmc.replay_min_rows)
         n_live = jnp.sum(live)
 
         # diagnostics: r_hat on the chunk's steps, and how it tracks the hidden score
@@ -302,6 +239,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
             r_hat_mean=rh.mean(), r_hat_std=rh.std(), r_hat_score_corr=corr,
             score_mean=sc.mean(), ring_size=ring.size.astype(jnp.float32),
             **{k: totals[i] for i, k in enumerate(TOTAL_NAMES)})
+        t_idx, _ = jnp.nonzero(valid, size=E, fill_value=0)
+        present = jnp.arange(E) < n_events
         events = {"present": present, "arrival": it0 + t_idx,
                   "env": b_idx, "value": value[t_idx, b_idx], "about": about[t_idx, b_idx]}
         fs = fs.replace(rm_params=p, rm_opt_state=o, ring=ring, rng=rng, totals=totals)

@@ -1,14 +1,12 @@
 """DeepTAMER inside jit, for batched experiments: credit by lag, a device feedback buffer, r_hat updates.
 
+The one in-jit implementation of these steps; `experiments.feedback_train` wires them into the DDPG chunk.
 The batched simulated teacher (`teachers.batched_teacher`) delivers (value, valid) per step and env.
 Without wall-clock times, credit is by lag from the arrival step: `credit.lag_weights` gives the weight
-of step k - j for feedback arriving at step k (0.9^j for the step window; the overlap / 3.8 of the time
-window on a regular clock). `credit_windows` gathers, for up to `max_events` feedbacks of a chunk, the
-(obs, action) of their windows; steps before the chunk's first step are not available and get weight 0
-(chunks are much longer than the window in batched runs). `FeedbackRing` is the 1e4-row feedback buffer
-in device memory; `tamer_update` adds a chunk's credited rows and takes `n_updates` minibatch steps of the
-weighted squared loss. All pure and jittable: the reward-model params and optimiser state are carried in
-and out as arrays.
+of step k - j for feedback arriving at step k. `draw_credited_steps` draws the credited steps of a chunk's
+events; `FeedbackRing` is the 1e4-row feedback buffer in device memory; `reward_model_updates` takes the
+minibatch steps of the weighted squared loss. All pure and jittable: the reward-model params and optimiser
+state are carried in and out as arrays.
 """
 
 from __future__ import annotations
@@ -22,25 +20,56 @@ import optax
 from mjx_protamer.human.reward_model import weighted_loss
 
 
-def credit_windows(obs, action, value, valid, lag_w, max_events: int):
-    """obs (T, B, O), action (T, B, A), value/valid (T, B), lag_w (L,) -> rows (E*L, ...) with weights.
+def draw_credited_steps(value, valid, lag_w, key, max_events: int, rows_per_event: int):
+    """value/valid (T, B) feedback by arrival step and env, lag_w (L,) credit weight of lag j -> credited steps.
 
-    Returns (obs, action, weight, target, n_events); rows of absent events or of steps before the
-    chunk have weight 0. Events beyond `max_events` in a chunk are dropped (count them with n_events).
+    For each of up to `max_events` events, `rows_per_event` lags are drawn in proportion to their credit
+    weight: a Monte-Carlo estimate of the weighted loss that stays cheap when a window spans hundreds of
+    steps (Deep TAMER's 3.8 s at 200 Hz is 760). Returns (rel (E, K) credited step relative to the chunk's
+    first step, possibly negative: an earlier chunk; env (E,); ok (E, K) the row is a real event; target
+    (E, K) the event's value; n_events, which may exceed max_events: the surplus is dropped).
     """
-    T = obs.shape[0]
-    L = lag_w.shape[0]
-    t_idx, b_idx = jnp.nonzero(valid, size=max_events, fill_value=0)
+    E, K = max_events, rows_per_event
     n_events = jnp.sum(valid)
-    present = jnp.arange(max_events) < n_events
-    steps = t_idx[:, None] - jnp.arange(L)[None, :]  # (E, L)
-    ok = (steps >= 0) & present[:, None]
-    s = jnp.clip(steps, 0, T - 1)
-    b = jnp.broadcast_to(b_idx[:, None], s.shape)
-    w = jnp.where(ok, lag_w[None, :], 0.0)
-    h = jnp.broadcast_to(value[t_idx, b_idx][:, None], s.shape)
-    flat = lambda x: x.reshape(max_events * L, *x.shape[2:])
-    return flat(obs[s, b]), flat(action[s, b]), flat(w), flat(h), n_events
+    t_idx, b_idx = jnp.nonzero(valid, size=E, fill_value=0)
+    present = jnp.arange(E) < n_events
+    logw = jnp.log(jnp.maximum(lag_w, 0.0) + 1e-30) + jnp.where(lag_w > 0, 0.0, -1e30)
+    lags = jax.random.categorical(key, logw, shape=(E, K))
+    ok = present[:, None] & (jnp.sum(lag_w) > 0)
+    target = jnp.broadcast_to(value[t_idx, b_idx][:, None], (E, K))
+    return t_idx[:, None] - lags, b_idx, ok, target, n_events
+
+
+def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRing", fresh_rows, key,
+                         n_fresh: int, n_replay: int, batch_size: int, replay_min_rows: int):
+    """`n_fresh` minibatch steps on the newly credited rows (drawn among those with weight > 0: Deep TAMER
+    updates on every feedback), then `n_replay` on uniform draws from the feedback ring (none until it holds
+    `replay_min_rows`). A step whose minibatch has no weight leaves params and optimiser state unchanged.
+    Returns (params, opt_state, losses (n,), live (n,))."""
+    obs, action, weight, target = fresh_rows
+    min_rows = min(replay_min_rows, ring.obs.shape[0])
+
+    def step(carry, xs):
+        p, o = carry
+        k, fresh = xs
+        kf, kr = jax.random.split(k)
+        fi = jax.random.categorical(kf, jnp.where(weight > 0, 0.0, -1e30), shape=(batch_size,))
+        ri = jax.random.randint(kr, (batch_size,), 0, jnp.maximum(ring.size, 1))
+        bo = jnp.where(fresh, obs[fi], ring.obs[ri])
+        ba = jnp.where(fresh, action[fi], ring.action[ri])
+        bw = jnp.where(fresh, weight[fi], ring.weight[ri] * (ring.size >= min_rows))
+        bh = jnp.where(fresh, target[fi], ring.target[ri])
+        loss, g = jax.value_and_grad(weighted_loss)(p, apply, bo, ba, bw, bh)
+        u, new_o = optimizer.update(g, o, p)
+        live = jnp.sum(bw) > 0
+        p = jax.tree.map(lambda a, b: jnp.where(live, a, b), optax.apply_updates(p, u), p)
+        o = jax.tree.map(lambda a, b: jnp.where(live, a, b), new_o, o)
+        return (p, o), (loss, live)
+
+    n = max(n_fresh + n_replay, 1)
+    fresh = jnp.arange(n) < max(n_fresh, n - n_replay)
+    (params, opt_state), (losses, live) = jax.lax.scan(step, (params, opt_state), (jax.random.split(key, n), fresh))
+    return params, opt_state, losses, live
 
 
 class FeedbackRing(NamedTuple):
@@ -70,20 +99,3 @@ def ring_add(ring: FeedbackRing, obs, action, weight, target) -> FeedbackRing:
     put = lambda store, new: store.at[rows].set(new[idx], mode="drop")
     return FeedbackRing(put(ring.obs, obs), put(ring.action, action), put(ring.weight, weight),
                         put(ring.target, target), (ring.ptr + count) % cap, jnp.minimum(ring.size + count, cap))
-
-
-def tamer_update(apply, optimizer, params, opt_state, ring: FeedbackRing, rows, key, n_updates: int,
-                 batch_size: int = 64):
-    """Add credited rows to the ring, then n_updates minibatch steps on uniform ring samples."""
-    ring = ring_add(ring, *rows)
-
-    def step(carry, k):
-        p, o = carry
-        r = jax.random.randint(k, (batch_size,), 0, jnp.maximum(ring.size, 1))
-        w = ring.weight[r] * (ring.size > 0)
-        loss, g = jax.value_and_grad(weighted_loss)(p, apply, ring.obs[r], ring.action[r], w, ring.target[r])
-        u, o = optimizer.update(g, o, p)
-        return (optax.apply_updates(p, u), o), loss
-
-    (params, opt_state), losses = jax.lax.scan(step, (params, opt_state), jax.random.split(key, n_updates))
-    return params, opt_state, ring, jnp.mean(losses)

@@ -203,47 +203,61 @@ def max_delay_steps(config: TeacherConfig, dt: float) -> int:
     return int(math.ceil(worst / dt)) + 1
 
 
-def batched_teacher_init(config: TeacherConfig, num_envs: int, dt: float) -> BatchedTeacherState:
-    d = max_delay_steps(config, dt)
-    t = teacher_init(config)
+def _as_channels(configs) -> tuple[TeacherConfig, ...]:
+    return (configs,) if isinstance(configs, TeacherConfig) else tuple(configs)
+
+
+def batched_teacher_init(configs, num_envs: int, dt: float) -> BatchedTeacherState:
+    """`configs`: a TeacherConfig, or a tuple of them that differ only in their channel (see batched_teacher)."""
+    d = max(max_delay_steps(c, dt) for c in _as_channels(configs))
+    t = teacher_init(_as_channels(configs)[0])
     return BatchedTeacherState(
         teacher=jax.tree.map(lambda x: jnp.broadcast_to(x, (num_envs, *x.shape)), t),
         pending_value=jnp.zeros((num_envs, d)), pending_valid=jnp.zeros((num_envs, d), bool),
         pending_about=jnp.zeros((num_envs, d), jnp.int32), step=jnp.zeros((), jnp.int32))
 
 
-def batched_teacher(config: TeacherConfig, dt: float, state: BatchedTeacherState, signals: jax.Array,
-                    key: jax.Array, arrival: bool = True):
-    """Run a chunk: signals (T, B, C) -> (state, out) with out["value"], out["valid"], out["about"] (T, B).
+def batched_teacher(configs, dt: float, state: BatchedTeacherState, signals: jax.Array, key: jax.Array,
+                    arrival: bool = True, kind=0, active=None):
+    """Run a chunk: signals (T, B, C) -> (state, out) with out["value"], out["valid"], out["about"], out["score"]
+    (T, B). The one batched teacher: the in-jit training path (`experiments.feedback_train`) runs it too.
 
-    With `arrival` (default), feedback is delivered at the step it would reach the learner: the step it
-    is about + (reaction delay + utterance + latency) / dt; `about` says which step it judged (for
-    diagnostics: a learner must not read it). Without, it is returned at the judged step itself.
-    Pure and jittable (config and dt static).
+    `configs` is one TeacherConfig, or a tuple of them that differ only in their channel; `kind` (an index,
+    may be traced) picks the channel that delivers, so every channel shares one compiled program; `active`
+    (B,) bool (may be traced) says which envs' teachers speak (default all). With `arrival` (default),
+    feedback is delivered at the step it would reach the learner: the step it is about + (reaction delay +
+    utterance + latency) / dt; `about` says which step it judged (for diagnostics: a learner must not read
+    it). Without, it is returned at the judged step itself.
     """
-    ch = config.channel
-    extra = ch.get("duration_s") + ch.get("latency_s")
+    channels = _as_channels(configs)
+    extras = jnp.asarray([c.channel.arrival_offset_s for c in channels])
     d = state.pending_value.shape[1]
     b = signals.shape[1]
+    rows = jnp.arange(b)
+    active = jnp.ones((b,), bool) if active is None else active
 
     def body(s: BatchedTeacherState, xs):
         sig, k = xs
         keys = jax.random.split(k, b)
-        teacher, dec = jax.vmap(lambda ts, x, kk: teacher_step(config, dt, ts, x, kk))(s.teacher, sig, keys)
+        decs = [jax.vmap(lambda ts, x, kk, c=c: teacher_step(c, dt, ts, x, kk))(s.teacher, sig, keys)
+                for c in channels]
+        teacher = decs[0][0]  # the teacher's state does not depend on the channel
+        value = jnp.stack([dec.value for _, dec in decs])[kind]
+        delay = jnp.stack([dec.delay_s for _, dec in decs])[kind]
+        give, score = decs[0][1].give & active, decs[0][1].score
         if not arrival:
-            out = {"value": jnp.where(dec.give, dec.value, 0.0), "valid": dec.give,
-                   "about": jnp.broadcast_to(s.step, (b,)), "score": dec.score}
+            out = {"value": jnp.where(give, value, 0.0), "valid": give,
+                   "about": jnp.broadcast_to(s.step, (b,)), "score": score}
             return s._replace(teacher=teacher, step=s.step + 1), out
-        lag = jnp.clip(jnp.round((dec.delay_s + extra) / dt).astype(jnp.int32), 1, d - 1)
+        lag = jnp.clip(jnp.round((delay + extras[kind]) / dt).astype(jnp.int32), 1, d - 1)
         slot = (s.step + lag) % d
-        rows = jnp.arange(b)
-        write = dec.give & ~s.pending_valid[rows, slot]  # a slot already taken keeps its feedback
-        pv = s.pending_value.at[rows, slot].set(jnp.where(write, dec.value, s.pending_value[rows, slot]))
+        write = give & ~s.pending_valid[rows, slot]  # a slot already taken keeps its feedback
+        pv = s.pending_value.at[rows, slot].set(jnp.where(write, value, s.pending_value[rows, slot]))
         pm = s.pending_valid.at[rows, slot].set(write | s.pending_valid[rows, slot])
         pa = s.pending_about.at[rows, slot].set(jnp.where(write, s.step, s.pending_about[rows, slot]))
         now = s.step % d
         out = {"value": jnp.where(pm[:, now], pv[:, now], 0.0), "valid": pm[:, now], "about": pa[:, now],
-               "score": dec.score}
+               "score": score}
         pm = pm.at[:, now].set(False)
         return BatchedTeacherState(teacher, pv, pm, pa, s.step + 1), out
 

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from mjx_protamer.human.batched import credit_windows, ring_add, ring_init, tamer_update
+from mjx_protamer.human.batched import draw_credited_steps, reward_model_updates, ring_add, ring_init
 from mjx_protamer.human.channels import ChannelConfig
 from mjx_protamer.human.clock import StepClock
 from mjx_protamer.human.credit import CreditAssigner, CreditConfig, lag_weights
@@ -30,21 +30,23 @@ def test_lag_weights_match_the_host_credit_on_a_regular_clock():
         np.testing.assert_allclose([host[k] for k in sorted(host)], [jit[k] for k in sorted(jit)], rtol=1e-5)
 
 
-def test_credit_windows_gather_hand_checked():
+def test_credited_steps_follow_the_lag_weights():
+    """The draw the training chunk uses: each event's lags in proportion to their weight, relative to the
+    chunk's first step (negative: an earlier chunk), the event's value as target; absent events not ok."""
     T, B = 6, 2
-    obs = jnp.arange(T * B, dtype=jnp.float32).reshape(T, B, 1)  # obs = 2 t + b
-    act = -obs
     valid = jnp.zeros((T, B), bool).at[1, 1].set(True).at[4, 0].set(True)
     value = jnp.zeros((T, B)).at[1, 1].set(-1.0).at[4, 0].set(0.5)
-    o, a, w, h, n = credit_windows(obs, act, value, valid, jnp.array([1.0, 0.9, 0.81]), max_events=3)
-    assert int(n) == 2
-    o, w, h = np.asarray(o).reshape(3, 3), np.asarray(w).reshape(3, 3), np.asarray(h).reshape(3, 3)
-    # event (t=1, b=1): steps 1, 0, (-1 absent); event (t=4, b=0): steps 4, 3, 2; third slot empty
-    np.testing.assert_allclose(o[0, :2], [3, 1])
-    np.testing.assert_allclose(w[0], [1.0, 0.9, 0.0])
-    np.testing.assert_allclose(o[1], [8, 6, 4])
-    np.testing.assert_allclose(w[1], [1.0, 0.9, 0.81])
-    assert (w[2] == 0).all() and (h[0] == -1).all() and (h[1] == 0.5).all()
+    lag_w = jnp.array([0.0, 0.0, 3.0, 1.0])  # lag 2 three times as likely as lag 3; lags 0, 1 never
+    rel, env, ok, target, n = jax.jit(lambda k: draw_credited_steps(value, valid, lag_w, k, 3, 4000))(
+        jax.random.PRNGKey(0))
+    rel, env, ok, target = (np.asarray(x) for x in (rel, env, ok, target))
+    assert int(n) == 2 and env[:2].tolist() == [1, 0]  # events in (step, env) order: (1, 1) then (4, 0)
+    assert ok[:2].all() and not ok[2].any()
+    assert set(np.unique(rel[0])) == {-1, -2} and set(np.unique(rel[1])) == {2, 1}
+    assert abs((rel[1] == 2).mean() - 0.75) < 0.03  # step 4 - lag 2
+    assert (target[0] == -1).all() and (target[1] == 0.5).all()
+    none = draw_credited_steps(value, valid, jnp.zeros(4), jax.random.PRNGKey(0), 3, 4)[2]
+    assert not np.asarray(none).any()  # no credit weight (DDPG alone): nothing credited
 
 
 def test_ring_keeps_only_weighted_rows_and_wraps():
@@ -58,15 +60,23 @@ def test_ring_keeps_only_weighted_rows_and_wraps():
     np.testing.assert_allclose(ring.obs[:, 0], [11, 2, 4, 10])
 
 
-def test_tamer_update_fits_targets_in_jit():
+def test_reward_model_updates_fit_the_credited_targets_in_jit():
+    """The updates the training chunk uses: fresh rows first, then ring replay; a weightless minibatch
+    changes nothing."""
     apply = reward_fn((32,))
     params = RewardMLP((32,)).init(jax.random.PRNGKey(0), jnp.zeros((1, 2)), jnp.zeros((1, 1)))
     opt = optax.adam(1e-2)
-    ring = ring_init(256, 2, 1)
     obs = jax.random.normal(jax.random.PRNGKey(1), (64, 2))
     act = jnp.zeros((64, 1))
     target = jnp.sign(obs[:, 0])
-    upd = jax.jit(lambda p, o, r, k: tamer_update(apply, opt, p, o, r, (obs, act, jnp.ones(64), target), k, 200))
-    params, _, ring, loss = upd(params, opt.init(params), ring, jax.random.PRNGKey(2))
-    assert int(ring.size) == 64 and float(loss) < 0.5
-    assert np.corrcoef(np.asarray(apply(params, obs, act)), np.asarray(target))[0, 1] > 0.9
+    rows = (obs, act, jnp.ones(64), target)
+    ring = ring_add(ring_init(256, 2, 1), *rows)
+    upd = jax.jit(lambda p, o, k: reward_model_updates(apply, opt, p, o, ring, rows, k, 100, 100, 32, 64))
+    new, _, losses, live = upd(params, opt.init(params), jax.random.PRNGKey(2))
+    assert bool(np.asarray(live).all()) and float(losses[-20:].mean()) < 0.5
+    assert np.corrcoef(np.asarray(apply(new, obs, act)), np.asarray(target))[0, 1] > 0.9
+    empty = (obs, act, jnp.zeros(64), target)
+    same, _, _, live = reward_model_updates(apply, opt, params, opt.init(params), ring_init(256, 2, 1), empty,
+                                            jax.random.PRNGKey(3), 5, 5, 32, 64)
+    assert not np.asarray(live).any()
+    jax.tree.map(lambda a, b: np.testing.assert_array_equal(a, b), same, params)
