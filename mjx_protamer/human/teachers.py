@@ -69,8 +69,10 @@ class Clause:
 # don't freeze". Each clause reads what the learner sees in (s, a) (the left and right touch blocks obs 0:26
 # and 26:52, the arm joint speeds obs 64:68 and 70:74) and holds for longer than a reaction delay's spread
 # (0.1-0.3 s), so a reward model can learn it from delayed feedback; and it asks for something the intrinsic
-# reward does not (its contact term saturates with one hand). With threshold 0.75 the teacher approves only
-# two-handed touch (score 1) and disapproves only a freeze without two-handed touch (score -1 or -0.5: -1).
+# reward does not (its contact term saturates with one hand, and nothing in it asks for the other). With
+# threshold 0.5 the teacher approves a sustained touch (+0.5; both hands +1: a prosody teacher sounds happier)
+# and disapproves a freeze (-1; -0.5 while touching). Threshold 0.75 (both hands only) gave 100-175 events per
+# 64k-step run, too few for the reward model (r_hat_corr_test ~0 over 5 seeds; docs/experiments.md).
 SELF_TOUCH_RULE = (
     Clause("obs_norm:0:26", 0.5, above=0.05, sustain=20),  # left hand or fingers touching, held 0.1 s
     Clause("obs_norm:26:52", 0.5, above=0.05, sustain=20),  # right hand or fingers touching, held 0.1 s
@@ -82,7 +84,7 @@ SELF_TOUCH_RULE = (
 @dataclasses.dataclass(frozen=True)
 class TeacherConfig:
     rule: tuple[Clause, ...] = SELF_TOUCH_RULE
-    threshold: float = 0.75  # |score| needed to consider giving feedback
+    threshold: float = 0.5  # |score| needed to consider giving feedback
     give_rate: float = 0.5
     min_gap_steps: int = 40
     flip_prob: float = 0.05
