@@ -1,0 +1,95 @@
+"""The infant rendered offscreen with MuJoCo's renderer, its touched regions highlighted.
+
+A pose is the model's full `qpos`. Live, the learner only hands over observations and actions; the
+observation holds the arm joints, wrist flexion and fingers (`EnvConfig.qpos_joints`) but not wrist
+rotation and ulnar deviation, which `pose_from_obs` takes from the position targets of the action
+(the servos track them to about 0.01 rad, docs/environment.md): a faithful picture, not the exact state.
+The touched regions of a pose come from native MuJoCo contacts with the env's own sensing rule.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from mjx_protamer.envs import body
+from mjx_protamer.envs.config import EnvConfig
+from mjx_protamer.envs.twin import SelfTouchTwinEnv
+
+TOUCHED_NOW = (1.0, 0.25, 0.1, 1.0)  # orange-red
+TOUCHED_BEFORE = (1.0, 0.8, 0.2, 1.0)  # amber
+
+
+class InfantScene:
+    region_names = body.REGIONS
+
+    def __init__(self, config: EnvConfig | None = None, width: int = 480, height: int = 480):
+        self.twin = SelfTouchTwinEnv(config or EnvConfig())
+        self.model = self.twin.model
+        self.m = self.twin.mj_model
+        self.data = mujoco.MjData(self.m)
+        self.renderer = mujoco.Renderer(self.m, height, width)
+        self.camera = mujoco.MjvCamera()
+        self.camera.lookat[:] = (0.17, 0.0, 0.05)
+        self.camera.distance = 0.78
+        self.camera.azimuth = 0.0  # from beyond the feet, head at the top of the picture
+        self.camera.elevation = -58.0
+        self.geom_region = np.asarray(self.model.sensing.geom_region)
+        jnt = mujoco.mjtObj.mjOBJ_JOINT
+        in_obs = set(int(i) for i in self.model.qpos_idx)
+        self._target_only = [(a, int(self.m.jnt_qposadr[mujoco.mj_name2id(self.m, jnt, name)]))
+                             for a, name in enumerate(body.ACTUATED_JOINTS)
+                             if int(self.m.jnt_qposadr[mujoco.mj_name2id(self.m, jnt, name)]) not in in_obs]
+        k = self.twin.config.k
+        self._qpos_at = 4 * (k + 3)
+
+    def start_pose(self) -> np.ndarray:
+        return np.asarray(self.model.init_qpos, np.float64).copy()
+
+    def pose_from_obs(self, obs: np.ndarray, action: np.ndarray) -> np.ndarray:
+        qpos = self.start_pose()
+        idx = self.model.qpos_idx
+        qpos[idx] = np.asarray(obs, np.float64)[self._qpos_at:self._qpos_at + len(idx)]
+        ctrl = self.model.action_to_ctrl(np, np.asarray(action, np.float64))
+        for a, adr in self._target_only:
+            qpos[adr] = ctrl[a]
+        return qpos
+
+    def touched(self, pose: np.ndarray) -> np.ndarray:
+        """The main regions (8,) a hand touches in this pose (native contacts, the env's rule)."""
+        self.twin.set_state(pose, np.zeros(self.m.nv), self.model.rest_ctrl)
+        return np.asarray(self.twin.sense()[1], bool)
+
+    def frame(self, pose: np.ndarray, now=None, before=None) -> np.ndarray:
+        """RGB uint8 (H, W, 3): regions touched `now` in red, `before` (so far) in amber."""
+        self.data.qpos[:] = pose
+        mujoco.mj_kinematics(self.m, self.data)
+        self.renderer.update_scene(self.data, camera=self.camera)
+        now = np.zeros(len(self.region_names), bool) if now is None else np.asarray(now, bool)
+        before = np.zeros_like(now) if before is None else np.asarray(before, bool)
+        scene = self.renderer.scene
+        for j in range(scene.ngeom):
+            g = scene.geoms[j]
+            if g.objtype != mujoco.mjtObj.mjOBJ_GEOM:
+                continue
+            r = self.geom_region[g.objid]
+            if 0 <= r < len(now) and now[r]:
+                g.rgba[:] = TOUCHED_NOW
+            elif 0 <= r < len(before) and before[r]:
+                g.rgba[:] = TOUCHED_BEFORE
+        return self.renderer.render().copy()
+
+    def colored_frame(self, rgba_by_region: np.ndarray) -> np.ndarray:
+        """The rest pose with each main region's geoms in its own colour (rows of (8, 4) RGBA): body maps."""
+        self.data.qpos[:] = self.start_pose()
+        mujoco.mj_kinematics(self.m, self.data)
+        self.renderer.update_scene(self.data, camera=self.camera)
+        scene = self.renderer.scene
+        for j in range(scene.ngeom):
+            g = scene.geoms[j]
+            if g.objtype == mujoco.mjtObj.mjOBJ_GEOM and 0 <= self.geom_region[g.objid] < len(rgba_by_region):
+                g.rgba[:] = rgba_by_region[self.geom_region[g.objid]]
+        return self.renderer.render().copy()
+
+    def close(self) -> None:
+        self.renderer.close()
