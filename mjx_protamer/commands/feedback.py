@@ -44,8 +44,8 @@ import sys
 import time
 from pathlib import Path
 
-LIVE = ("keyboard", "prosody", "whisper")
-FEEDBACK_CHOICES = ("keyboard", "prosody", "whisper", "simulated:keyboard", "simulated:prosody",
+LIVE = ("keyboard", "prosody", "whisper", "web")
+FEEDBACK_CHOICES = ("keyboard", "prosody", "whisper", "web", "simulated:keyboard", "simulated:prosody",
                     "simulated:speech", "none")
 
 
@@ -58,7 +58,8 @@ def register(subparsers) -> None:
         "or Ctrl-C.",
     )
     p.add_argument("--feedback", choices=FEEDBACK_CHOICES, default="keyboard",
-                   help="where feedback comes from (simulated:* for a dry run without a human; none: no feedback)")
+                   help="where feedback comes from (web: the live page's buttons and keys only, no terminal needed; "
+                   "simulated:* for a dry run without a human; none: no feedback)")
     p.add_argument("--learner", choices=("ddpg", "coach"), default="ddpg",
                    help="ddpg: the checkpoint's DDPG + DeepTAMER reward model; coach: Deep COACH on the same env")
     p.add_argument("--checkpoint", type=Path, default=None,
@@ -172,6 +173,8 @@ def _finetune(args: argparse.Namespace) -> int:
     elif args.checkpoint is None:
         return _fail("--checkpoint is required (a pretrain run directory), unless --resume or --replay")
     live = args.feedback in LIVE
+    if args.feedback == "web" and (args.view or _default_view()) != "web":
+        return _fail("--feedback web takes feedback from the live page: it needs --view web")
     # Fail fast, before the minutes of loading and compiling, on what a live user can get wrong.
     if args.feedback == "keyboard" and not sys.stdin.isatty():
         return _fail("--feedback keyboard reads keys from the terminal, but stdin is not a terminal (tty). "
@@ -348,7 +351,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
         run.log.note(event="resume" if resume else "start", feedback=args.feedback, learner=args.learner,
                      checkpoint=str(args.checkpoint), checkpoint_step=int(step), chunk_steps=chunk_steps, dt=fb.dt)
 
-    view_kind = args.view or __import__("mjx_protamer.view.live", fromlist=["_"]).default_kind()
+    view_kind = args.view or _default_view()
     keys = listener = stop_event = view = None
     listener_said = wav_over = False
     interrupted = False
@@ -397,8 +400,9 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                         print(f"[finetune] voice listener ({args.feedback}, {args.listen_source}) started, pid "
                               f"{listener.pid}; its lines start with [voice]", flush=True)
                     if live:
-                        print("[finetune] ready: give feedback now" + (" (+ good, - bad, 0 neutral, q quit)"
-                              if keys is not None else " (speak)"), flush=True)
+                        how = (" (+ good, - bad, 0 neutral, q quit)" if keys is not None else
+                               " (the page's + / - / 0)" if args.feedback == "web" else " (speak)")
+                        print("[finetune] ready: give feedback now" + how, flush=True)
                 if args.autosave_s > 0 and time.time() - last_save >= args.autosave_s:
                     t_save = time.time()
                     _save(run, out, args.learner, saved_config, final=False)
@@ -471,6 +475,11 @@ def _coach_resume_step(out: Path) -> int:
 
 
 # --------------------------------------------------------------------------- the live view
+
+def _default_view() -> str:
+    from mjx_protamer.view.live import default_kind
+    return default_kind()
+
 
 def _start_view(kind: str, pre, run, port: int):
     """The LiveView process (web page or window), or None (--view none, or it could not start: the
