@@ -19,6 +19,7 @@ class PointScene:
         self.config = config or ToyEnvConfig()
         self.width, self.height = width, height
         self._trail: list[tuple[float, float]] = []
+        self._goal = np.full(2, np.nan)
 
     def start_pose(self) -> np.ndarray:
         return np.zeros(4)
@@ -46,6 +47,8 @@ class PointScene:
         x1, y1 = self._px((1, -1))
         draw.rectangle((x0, y0, x1, y1), outline=(90, 90, 90), width=2)
         pos, goal = pose[:2], pose[2:4]
+        if not np.array_equal(goal, self._goal):  # a new episode: a new trail
+            self._trail, self._goal = [], goal.copy()
         self._trail = (self._trail + [tuple(pos)])[-40:]
         if len(self._trail) > 1:
             draw.line([self._px(p) for p in self._trail], fill=(120, 150, 210), width=2)
