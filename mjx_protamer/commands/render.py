@@ -55,6 +55,12 @@ def _render(args: argparse.Namespace) -> int:
         resolve_checkpoint(args.checkpoint)
     except (ValueError, FileNotFoundError) as e:
         return _fail(str(e))
+    try:
+        import imageio  # noqa: F401
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError as e:
+        return _fail(f"{e.name} is missing: install the view extra (pip install -e '.[view]'; "
+                     f"scripts/test.sh does)")
 
     from mjx_protamer.view.gl import GLUnavailable
     from mjx_protamer.view.scenes import prepare_gl_for

@@ -186,6 +186,6 @@ def _body_map(args, config, summary):
         return write_body_map(summary["region_touch_frequency"], path,
                               f"{summary['episodes']} test episodes, checkpoint step {summary['checkpoint_step']}",
                               config.env)
-    except (GLUnavailable, OSError) as e:
+    except (GLUnavailable, OSError, ImportError) as e:
         print(f"note: no body map: {e}", file=sys.stderr)
         return None

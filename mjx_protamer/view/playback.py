@@ -32,7 +32,8 @@ class Player:
         self.seq = 0  # frames made so far
         self.skipped = 0  # steps that were due but never drawn (rendering behind)
         self.r_hat: deque = deque()  # (step, prediction) over the last history_s seconds
-        self.status: dict = {}
+        self.status: dict = {}  # the learner's, from the newest snapshot
+        self.shown: dict = {}  # the render thread's: the step on screen and its regions
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: str | None = None
@@ -59,7 +60,7 @@ class Player:
         with self._lock:
             r = list(self.r_hat)
             stride = max(1, len(r) // 250)
-            return {"type": "status", **self.status, "frames": self.seq, "skipped_steps": self.skipped,
+            return {"type": "status", **self.status, **self.shown, "frames": self.seq, "skipped_steps": self.skipped,
                     "r_hat": [[s, round(v, 4)] for s, v in r[::stride]], "error": self.error}
 
     # --- the render thread ----------------------------------------------------------------------
@@ -81,7 +82,7 @@ class Player:
             return
         names = scene.region_names
         so_far = np.zeros(len(names), bool)
-        shown: tuple[int, int] | None = None  # (snapshot id, step index) last drawn
+        drawn: tuple[int, int] | None = None  # (chunk first step, step index) last drawn
         try:
             while not self._stop.is_set():
                 t_frame = time.time()
@@ -93,12 +94,12 @@ class Player:
                 n = len(snap["obs"])
                 k = int(np.clip((time.time() - snap["t0"]) / snap["dt"], 0, n - 1))
                 key = (snap["first_step"], k)
-                if key == shown:
+                if key == drawn:
                     time.sleep(0.01)
                     continue
-                if shown is not None and shown[0] == key[0]:
-                    self.skipped += max(0, k - shown[1] - 1)
-                shown = key
+                if drawn is not None and drawn[0] == key[0]:
+                    self.skipped += max(0, k - drawn[1] - 1)
+                drawn = key
                 pose = scene.pose_from_obs(snap["obs"][k], snap["action"][k])
                 now = scene.touched(pose)
                 so_far |= now
@@ -111,8 +112,7 @@ class Player:
                 with self._lock:
                     self._frame = jpeg
                     self.seq += 1
-                    self.status["regions_now"] = [n_ for n_, on in zip(names, now) if on]
-                    self.status["shown_step"] = step
+                    self.shown = {"regions_now": [n_ for n_, on in zip(names, now) if on], "shown_step": step}
                 spare = self.min_period - (time.time() - t_frame)
                 if spare > 0:
                     time.sleep(spare)

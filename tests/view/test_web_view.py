@@ -84,6 +84,7 @@ def test_live_page_in_headless_chromium_shows_the_run_and_its_buttons_feed_the_q
             page.wait_for_function("document.getElementById('last').textContent.includes('credited steps')",
                                    timeout=20_000)
             assert page.inner_text("#learner").startswith("ddpg, feedback web")
+            assert int(page.inner_text("#step")) > 0  # the step on screen
             page.screenshot(path=str(tmp_path / "live_page.png"))
             browser.close()
         s.proc.send_signal(signal.SIGINT)
