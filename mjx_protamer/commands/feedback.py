@@ -202,6 +202,9 @@ def _finetune(args: argparse.Namespace) -> int:
     except FileNotFoundError as e:
         return _fail(f"--checkpoint: {e} (expected DIR/config.yaml and DIR/checkpoints/<step>/)")
 
+    from mjx_protamer.commands.train import _enable_compile_cache
+
+    _enable_compile_cache()  # the next session on this checkpoint starts in seconds
     print(f"[finetune] loading {ckpt} (the first chunk compiles: this can take a minute or two)", flush=True)
     try:
         loaded = _load(args, ckpt)
@@ -557,6 +560,9 @@ def _replay(args) -> int:
     chunks = [r for r in records if "chunk" in r]
     final = [r["events"] for r in records if r.get("final")]
     drains = [r["events"] for r in chunks] + (final[:1] or [[]])
+    from mjx_protamer.commands.train import _enable_compile_cache
+
+    _enable_compile_cache()
     pre, env, loaded, step = _load(args, step_dir)
     fb = load_feedback_config(manifest["config"], manifest["overrides"]).feedback
     args.out.mkdir(parents=True, exist_ok=True)

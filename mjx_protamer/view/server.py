@@ -92,4 +92,4 @@ async def serve(app: web.Application, port: int = 0) -> tuple[web.AppRunner, int
     await runner.setup()
     site = web.TCPSite(runner, "127.0.0.1", port)
     await site.start()
-    return runner, site._server.sockets[0].getsockname()[1]
+    return runner, runner.addresses[0][1]
