@@ -164,7 +164,8 @@ def _finetune(args: argparse.Namespace) -> int:
     if not 0 <= args.port <= 65535:
         raise ConfigError(f"--port must be in 0..65535, got {args.port}")
     if args.replay is not None:
-        return _replay(args)
+        from mjx_protamer.commands.finetune_replay import replay
+        return replay(args)
     if args.resume:
         problem = _resume_problem(args)
         if problem:
@@ -173,7 +174,8 @@ def _finetune(args: argparse.Namespace) -> int:
     elif args.checkpoint is None:
         return _fail("--checkpoint is required (a pretrain run directory), unless --resume or --replay")
     live = args.feedback in LIVE
-    if args.feedback == "web" and (args.view or _default_view()) != "web":
+    from mjx_protamer.commands.finetune_view import default_view
+    if args.feedback == "web" and (args.view or default_view()) != "web":
         return _fail("--feedback web takes feedback from the live page: it needs --view web")
     # Fail fast, before the minutes of loading and compiling, on what a live user can get wrong.
     if args.feedback == "keyboard" and not sys.stdin.isatty():
@@ -354,7 +356,9 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
         run.log.note(event="resume" if resume else "start", feedback=args.feedback, learner=args.learner,
                      checkpoint=str(args.checkpoint), checkpoint_step=int(step), chunk_steps=chunk_steps, dt=fb.dt)
 
-    view_kind = args.view or _default_view()
+    from mjx_protamer.commands.finetune_view import default_view, last_event as _last_event, snapshot, start_view
+
+    view_kind = args.view or default_view()
     keys = listener = stop_event = view = None
     listener_said = wav_over = False
     interrupted = False
@@ -379,13 +383,13 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                 recorder.chunk(chunks - 1, c["first_step"], c["t0"], [o[0] for o in run.outcomes])
                 last_event = _last_event(run, args.learner) or last_event
                 if view is not None:
-                    view.offer(_snapshot(run, args, m, t0, fb.dt, last_event))
+                    view.offer(snapshot(run, args, m, t0, fb.dt, last_event))
                 _print_chunk(run, m, args.learner)
                 _print_outcomes(run, args.learner)
                 if chunks == 1:  # compiled and running: now the feedback sources and the view start
                     if stopper.signum is not None:
                         break
-                    view = _start_view(view_kind, pre, run, args.port)
+                    view = start_view(view_kind, pre, run, args.port)
                     if args.feedback == "keyboard":
                         from mjx_protamer.human.keyboard import KeyboardFeedback
                         keys = KeyboardFeedback(run.queue).start()
@@ -477,108 +481,6 @@ def _coach_resume_step(out: Path) -> int:
     return int(json.loads(p.read_text())["step"]) if p.is_file() else 0
 
 
-# --------------------------------------------------------------------------- the live view
-
-def _default_view() -> str:
-    from mjx_protamer.view.live import default_kind
-    return default_kind()
-
-
-def _start_view(kind: str, pre, run, port: int):
-    """The LiveView process (web page or window), or None (--view none, or it could not start: the
-    session goes on without it)."""
-    if kind == "none":
-        return None
-    from mjx_protamer.view.live import LiveView
-
-    try:
-        view = LiveView(kind, pre, run.queue, port=port)
-        url = view.start()
-    except Exception as e:
-        print(f"[view] not available ({type(e).__name__}: {e}); the session goes on without it", flush=True)
-        return None
-    print(f"[view] {url}" if url else "[view] MuJoCo viewer window open (+ / - / 0 keys there)", flush=True)
-    return view
-
-
-def _last_event(run, learner: str) -> dict | None:
-    """The last drained event and what became of it, for the page."""
-    if not run.outcomes:
-        return None
-    event, got, why = run.outcomes[-1]
-    return {"value": float(event.value), "source": event.source, "t": float(event.t_start),
-            "outcome": _outcome_text(run, got, why, learner)}
-
-
-def _snapshot(run, args, m, t_wall: float, dt: float, last_event) -> dict:
-    """What the view needs of a chunk: its steps (observations, actions) shown from `t_wall`, the reward
-    model's prediction on them and the learner's status."""
-    import numpy as np
-
-    c = run.last_chunk
-    r_hat = None
-    if args.learner == "ddpg" and run.use_model:
-        r_hat = np.asarray(run.model.predict(c["obs"], c["action"])).reshape(-1).astype(np.float32)
-    status = {"learner": args.learner, "feedback": args.feedback, "contact_rate": float(m["contact_rate"]),
-              "step_reward": float(m["step_reward"]), "events": int(run.events),
-              "credited": int(run.credited) if args.learner == "ddpg" else int(run.corrections),
-              "updates": int(run.model.updates) if args.learner == "ddpg" else int(run.learner.updates)}
-    return {"first_step": int(c["first_step"]), "t0": float(t_wall), "dt": float(dt),
-            "obs": np.asarray(c["obs"], np.float32), "action": np.asarray(c["action"], np.float32),
-            "r_hat": r_hat, "status": status, "last_event": last_event}
-
-
-# --------------------------------------------------------------------------- replay
-
-def _replay(args) -> int:
-    """Rerun a recorded session headless (`--replay SESSION --out DIR`): the same checkpoint, configs and
-    chunks, and each drain of the queue given the events the session drained then."""
-    from mjx_protamer.config import ConfigError
-    from mjx_protamer.human.session_record import ScriptedQueue, read_session, tree_sha256
-    from mjx_protamer.human.tamer_loop import load_feedback_config
-
-    if args.out is None:
-        raise ConfigError("--replay needs --out, a new directory for the rerun")
-    try:
-        manifest, records = read_session(args.replay)
-    except FileNotFoundError as e:
-        return _fail(f"--replay: {e}")
-    if manifest.get("resumed"):
-        return _fail(f"--replay: the session in {args.replay} was resumed (--resume); a replay reruns sessions "
-                     f"that ran from their start in one go")
-    if args.out.absolute() == args.replay.absolute():
-        return _fail("--replay: --out must be a new directory, not the session's own")
-    step_dir = Path(manifest["checkpoint_step_dir"])
-    if not step_dir.is_dir() or tree_sha256(step_dir) != manifest["checkpoint_sha256"]:
-        return _fail(f"--replay: the session started from {step_dir}, which is missing or has changed "
-                     f"(SHA-256 differs); a replay needs the very same checkpoint")
-    args.learner = manifest["learner"]
-    args.checkpoint = step_dir
-    args.coach_delay_s = manifest["coach_delay_s"]
-    args.coach_policy = Path(manifest["coach_policy"]) if manifest["coach_policy"] else None
-    args.resume = False
-    chunks = [r for r in records if "chunk" in r]
-    final = [r["events"] for r in records if r.get("final")]
-    drains = [r["events"] for r in chunks] + (final[:1] or [[]])
-    from mjx_protamer.commands.train import _enable_compile_cache
-
-    _enable_compile_cache()
-    pre, env, loaded, step = _load(args, step_dir)
-    fb = load_feedback_config(manifest["config"], manifest["overrides"]).feedback
-    args.out.mkdir(parents=True, exist_ok=True)
-    mode = None if manifest["feedback"] == "none" else "queue"
-    run, saved_config = _build_run(args, pre, env, loaded, step, fb, manifest["chunk_steps"], args.out, mode,
-                                   queue=ScriptedQueue(drains))
-    print(f"[replay] {manifest['learner']} session of {len(chunks)} chunks, "
-          f"{sum(len(d) for d in drains)} events, from {step_dir}", flush=True)
-    for r in chunks:
-        run.step_chunk(t0=r["t0"])
-    run.process_events(step=max(0, run.first_step - 1))
-    _save(run, args.out, args.learner, saved_config)
-    print(f"[replay] done: step {run.first_step}, {run.events} events; saved in {args.out}", flush=True)
-    return 0
-
-
 def _warm_up(run, learner: str) -> None:
     """Compile the feedback update before the first event (a first key press must not stall a chunk)."""
     import jax
@@ -610,23 +512,13 @@ def _print_chunk(run, m, learner: str) -> None:
               f"r_hat updates {run.model.updates}", flush=True)
 
 
-def _outcome_text(run, got, why, learner: str) -> str:
-    """What an accepted event did: the steps it credited (DDPG) or corrected (COACH), or why nothing."""
-    if why is not None:
-        return f"accepted, not used: {why}"
-    if learner == "coach":
-        c = run.learner.config
-        end = got - c.human_delay_steps
-        return (f"accepted, corrects steps {end - c.window + 1}..{end} (the window "
-                f"{c.human_delay_steps} steps before step {got})")
-    return f"accepted, credited steps {min(got.steps)}..{max(got.steps)} (lands on step {got.step})"
-
-
 def _print_outcomes(run, learner: str) -> None:
+    from mjx_protamer.commands.feedback_text import outcome_text
+
     for event, got, why in run.outcomes:
         label = event.details.get("transcript") or event.details.get("key") or ""
         head = f"[event] {event.source} {event.value:+.2f}" + (f" ({label!r})" if label else "")
-        print(f"{head}: {_outcome_text(run, got, why, learner)}", flush=True)
+        print(f"{head}: {outcome_text(run, got, why, learner)}", flush=True)
     run.outcomes = []
 
 
