@@ -59,7 +59,7 @@ class Player:
     def status_message(self) -> dict:
         with self._lock:
             r = list(self.r_hat)
-            stride = max(1, len(r) // 250)
+            stride = max(1, -(-len(r) // 250))  # at most 250 points for the page
             return {"type": "status", **self.status, **self.shown, "frames": self.seq, "skipped_steps": self.skipped,
                     "r_hat": [[s, round(v, 4)] for s, v in r[::stride]], "error": self.error}
 
