@@ -20,8 +20,9 @@ def start_view(kind: str, pre, run, port: int):
     try:
         view = LiveView(kind, pre, run.queue, port=port)
         url = view.start()
-    except Exception as e:
-        print(f"[view] not available ({type(e).__name__}: {e}); the session goes on without it", flush=True)
+    except Exception as e:  # RuntimeError: the view process's own report, already naming its error
+        why = str(e) if type(e) is RuntimeError else f"{type(e).__name__}: {e}"
+        print(f"[view] not available ({why}); the session goes on without it", flush=True)
         return None
     print(f"[view] {url}" if url else "[view] MuJoCo viewer window open (+ / - / 0 keys there)", flush=True)
     return view
