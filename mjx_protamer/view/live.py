@@ -33,6 +33,8 @@ class LiveView:
     def __init__(self, kind: str, run_config, feedback_queue, port: int = 0, start_timeout_s: float = 120.0):
         if kind not in ("web", "window"):
             raise ValueError(f"view kind must be web or window, got {kind!r}")
+        if kind == "window" and default_kind() != "window":
+            raise RuntimeError("--view window needs a display (DISPLAY is not set); use --view web")
         if kind == "web":
             from mjx_protamer.view.gl import GLUnavailable, choose_backend
 
@@ -56,10 +58,16 @@ class LiveView:
 
     def start(self) -> str | None:
         self.process.start()
-        try:
-            ok, what = self._ready.get(timeout=self.timeout)
-        except queue_lib.Empty:
-            ok, what = False, f"the view process did not start within {self.timeout:.0f} s"
+        end = time.time() + self.timeout
+        ok, what = False, f"the view process did not start within {self.timeout:.0f} s"
+        while time.time() < end:
+            try:
+                ok, what = self._ready.get(timeout=0.5)
+                break
+            except queue_lib.Empty:
+                if not self.process.is_alive():  # crashed without a word (e.g. in the GL driver)
+                    what = f"the view process exited with code {self.process.exitcode} while starting"
+                    break
         if not ok:
             self.close()
             raise RuntimeError(what)

@@ -74,3 +74,16 @@ def test_offering_chunks_to_a_busy_view_never_blocks_the_learner():
     results = [view.offer(_snapshot(i * 200)) for i in range(50)]
     assert time.perf_counter() - t < 1.0
     assert view.offered == 50 and view.dropped == 50 and not any(results)
+
+
+def test_window_view_without_a_display_is_a_clear_error(monkeypatch):
+    import pytest
+
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.human.queue import FeedbackQueue
+    from mjx_protamer.view.live import LiveView
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(RuntimeError, match="needs a display .* use --view web"):
+        LiveView("window", PretrainConfig(), FeedbackQueue())
