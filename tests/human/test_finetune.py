@@ -314,6 +314,15 @@ def test_finetune_whisper_from_a_wav_of_espeak_speech(toy_run, tmp_path):
     assert text.count("accepted, credited steps") == 2
     assert reward_model_changed(out)
     assert len(list((out / "segments").glob("*.wav"))) == 2  # the scored utterances, for replay
+    # the voice session replays without a human or a microphone: the same reward model, bit for bit
+    from mjx_protamer.human.session_record import read_session
+    manifest, _ = read_session(out)
+    assert Path(manifest["segments"]) == out / "segments"
+    assert run_main("--replay", out, "--out", tmp_path / "again") == 0
+    r1, r2 = _reward_model_params(out / "reward_model.msgpack"), _reward_model_params(tmp_path / "again" / "reward_model.msgpack")
+    assert r1["updates"] == r2["updates"] > 0 and _leaves_equal(r1["params"], r2["params"])
+    from mjx_protamer.experiments.evaluate import load_run
+    assert _leaves_equal(load_run(out)[2].actor_params, load_run(tmp_path / "again")[2].actor_params)
 
 
 def _tiny_prosody_model(path: Path) -> str:
