@@ -5,4 +5,6 @@ transformers, faster-whisper, sounddevice) are imported inside the functions tha
 Entry point for the learner: `audio_frontend.listen.start_listener(queue, config, scorer, source)`.
 """
 
-__all__ = ["config", "errors", "sources", "vad", "rules", "calibration", "models", "scorers", "listen", "bench"]
+__all__ = ["config", "errors", "sources", "vad", "rules", "calibration", "models", "scorers", "listen", "bench",
+           "sentiment", "prosody_features", "prosody_model", "preflight", "labelled", "report", "synth", "testset",
+           "validation", "vad_compare"]

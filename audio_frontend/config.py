@@ -35,7 +35,7 @@ class AudioConfig:
 
 @dataclasses.dataclass(frozen=True)
 class VadConfig:
-    kind: Literal["rms", "webrtc"] = "rms"
+    kind: Literal["rms", "webrtc", "silero"] = "rms"
     # RMS: absolute threshold in dBFS, or relative to a noise floor measured over the first chunks.
     threshold_mode: Literal["absolute", "noise_floor"] = "absolute"
     threshold_dbfs: float = -40.0
@@ -52,6 +52,8 @@ class VadConfig:
     max_segment_s: float = 3.5          # longer utterances are cut here and scored
     webrtc_aggressiveness: int = 3      # 0..3, webrtcvad only
     webrtc_speech_fraction: float = 0.5  # fraction of 30 ms frames voiced for a chunk to count as speech
+    silero_threshold: float = 0.5       # silero-vad speech probability per 32 ms frame
+    silero_speech_fraction: float = 0.3  # fraction of a chunk's frames above the threshold for speech
 
     def validate(self) -> None:
         check(-90.0 <= self.threshold_dbfs < 0.0, "threshold_dbfs", "must be within -90..0 dBFS")
@@ -67,10 +69,15 @@ class VadConfig:
               "must lie within [min_segment_s, max_segment_s]")
         check(0 <= self.webrtc_aggressiveness <= 3, "webrtc_aggressiveness", "must be 0..3")
         check(0.0 < self.webrtc_speech_fraction <= 1.0, "webrtc_speech_fraction", "must be in (0, 1]")
+        check(0.0 < self.silero_threshold < 1.0, "silero_threshold", "must be in (0, 1)")
+        check(0.0 < self.silero_speech_fraction <= 1.0, "silero_speech_fraction", "must be in (0, 1]")
 
 
 @dataclasses.dataclass(frozen=True)
 class ProsodyConfig:
+    # "features": Praat prosodic features + the user's own model fitted by `protamer calibrate` (offline);
+    # "wav2vec2": a speech-emotion model's P(positive_label) - P(negative_label) (needs its weights).
+    kind: Literal["features", "wav2vec2"] = "features"
     model: str = "superb/wav2vec2-base-superb-er"   # hub id (from the HF cache) or a local folder
     positive_label: str = "hap"                      # valence = P(positive_label) - P(negative_label)
     negative_label: str = "ang"
@@ -80,13 +87,23 @@ class ProsodyConfig:
     min_samples_per_sign: int = 3       # calibration refuses fewer positive or negative samples
     min_tau: float = 1e-3               # calibration refuses a smaller tau
     threads: int = 2
+    # features: |valence| below this gives reward 0 (neutral speech and fillers give no feedback)
+    neutral_band: float = 0.2
+    pitch_floor_hz: float = 60.0        # Praat's pitch search range; covers low male to child voices
+    pitch_ceiling_hz: float = 600.0
 
     def validate(self) -> None:
+        from audio_frontend.calibration import tau_problem
+
         check(bool(self.model.strip()), "model", "must name a model id or a folder")
         check(self.positive_label != self.negative_label, "negative_label", "must differ from positive_label")
-        check(self.tau is None or self.tau > 0.0, "tau", "must be > 0 (or null to use the calibration file)")
+        check(0.0 < self.min_tau < 1.0, "min_tau", "must be in (0, 1)")
+        problem = None if self.tau is None else tau_problem(self.tau, self.min_tau)
+        check(problem is None, "tau", f"{problem} (or null to use the calibration file)")
         check(self.min_samples_per_sign >= 1, "min_samples_per_sign", "must be >= 1")
-        check(self.min_tau > 0.0, "min_tau", "must be > 0")
+        check(0.0 <= self.neutral_band < 1.0, "neutral_band", "must be in [0, 1)")
+        check(20.0 <= self.pitch_floor_hz < self.pitch_ceiling_hz <= 2000.0, "pitch_floor_hz",
+              "need 20 <= pitch_floor_hz < pitch_ceiling_hz <= 2000")
         check(self.threads >= 1, "threads", "must be >= 1")
 
 
@@ -112,6 +129,14 @@ class AsrConfig:
 
 @dataclasses.dataclass(frozen=True)
 class SentimentConfig:
+    # Behind the rules: "vader" (the VADER lexicon shipped by vaderSentiment, offline), "distilbert" (the
+    # transformers classifier `model`, needs its weights) or "auto" (distilbert when its weights are on
+    # disk, else vader).
+    kind: Literal["vader", "distilbert", "auto"] = "auto"
+    vader_threshold: float = 0.05       # |compound| below this is neutral (0): VADER's own convention
+    # Words VADER's lexicon scores that are neutral in this task: the self-touch task talks about hands
+    # ("hand" is +2.2 in VADER, as in "give me a hand"), so "look at the hand" must not be praise.
+    vader_neutral_words: tuple[str, ...] = ("hand",)
     model: str = "distilbert/distilbert-base-uncased-finetuned-sst-2-english"
     positive_labels: tuple[str, ...] = ("POSITIVE", "LABEL_1", "pos", "positive")
     negative_labels: tuple[str, ...] = ("NEGATIVE", "LABEL_0", "neg", "negative")
@@ -126,6 +151,7 @@ class SentimentConfig:
 
     def validate(self) -> None:
         check(bool(self.model.strip()), "model", "must name a model")
+        check(0.0 <= self.vader_threshold < 1.0, "vader_threshold", "must be in [0, 1)")
         check(bool(self.positive_labels) and bool(self.negative_labels), "positive_labels",
               "positive_labels and negative_labels must both be non-empty")
         both = {k.lower() for k in self.affirmative} & {k.lower() for k in self.negative}

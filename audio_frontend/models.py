@@ -55,9 +55,10 @@ def load_pretrained(loader, ref: str, what: str, config_key: str, files: str, al
         ref = _check_folder(ref, what, config_key, files)
         try:
             return loader.from_pretrained(ref, local_files_only=True, **kw)
-        except (OSError, ValueError) as e:
+        except Exception as e:  # OSError, ValueError, safetensors' SafetensorError on a corrupt file, ...
             raise MissingWeightsError(f"{what} folder {ref} (from {config_key}) is incomplete or unreadable: "
-                                      f"{e}\nIt must hold {files}.") from None
+                                      f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}\n"
+                                      f"It must hold {files}.") from None
     try:
         return loader.from_pretrained(ref, local_files_only=True, **kw)
     except (OSError, ValueError) as first:
@@ -69,6 +70,20 @@ def load_pretrained(loader, ref: str, what: str, config_key: str, files: str, al
     except (OSError, ValueError) as e:
         raise MissingWeightsError(_how_to_provide(what, ref, config_key, files)
                                   + f"\n(download failed: {str(e).splitlines()[0]})") from None
+
+
+def weights_on_disk(ref: str) -> bool:
+    """Whether a transformers model's config.json is in `ref` (a folder) or in the Hugging Face cache.
+
+    Cheap (no torch import): used to choose a default and to check before a session starts."""
+    if looks_like_path(ref):
+        return (Path(os.path.expanduser(ref)) / "config.json").is_file()
+    try:
+        from huggingface_hub import try_to_load_from_cache
+    except ImportError:  # pragma: no cover - comes with transformers
+        return False
+    found = try_to_load_from_cache(ref, "config.json")
+    return isinstance(found, str) and os.path.isfile(found)
 
 
 def set_threads(n: int) -> None:

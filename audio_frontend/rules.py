@@ -11,6 +11,9 @@ from typing import Callable
 
 _BRACKETS = re.compile(r"[\[\(\*][^\]\)\*]*[\]\)\*]")   # Whisper's [BLANK_AUDIO], (music), *cough*
 _WORD = re.compile(r"[a-z0-9']+")
+# Words that can turn a keyword around ("not good", "never wrong"): a sentence with one goes to the
+# classifier, which reads negation, instead of the keyword vote.
+NEGATORS = frozenset({"not", "never", "nothing", "nobody", "neither", "nor", "without", "hardly", "barely"})
 
 
 def words_of(text: str) -> list[str]:
@@ -21,10 +24,14 @@ def words_of(text: str) -> list[str]:
 @dataclass(frozen=True)
 class RuleDecision:
     value: float          # +1, -1 or 0
-    rule: str             # "keyword", "filler", "empty", "classifier"
+    rule: str             # "keyword", "keyword_vote", "filler", "empty", "classifier", "no_classifier"
     words: tuple[str, ...]
     label: str | None = None
     score: float | None = None
+
+
+# A classifier that can say "neither" (VADER below its threshold) gives no feedback for that text.
+NEUTRAL_LABEL = "NEUTRAL"
 
 
 class RuleLayer:
@@ -50,14 +57,28 @@ class RuleLayer:
             return self.keyword_value(content[:1]) if len(content) > 1 else None
         return None
 
+    def vote_value(self, content: list[str]) -> float | None:
+        """Keywords of one polarity only, and no negator: that polarity ("no, wrong way", "stop it now")."""
+        if any(w in NEGATORS or w.endswith("n't") for w in content):
+            return None
+        text = " " + " ".join(content) + " "
+        pos = any(f" {k} " in text for k in self.affirmative)
+        neg = any(f" {k} " in text for k in self.negative)
+        if pos != neg:
+            return 1.0 if pos else -1.0
+        return None
+
     def label_value(self, label: str) -> float:
         lab = label.lower()
+        if lab == NEUTRAL_LABEL.lower():
+            return 0.0
         if lab in self.positive_labels:
             return 1.0
         if lab in self.negative_labels:
             return -1.0
         raise ValueError(f"sentiment label {label!r} is neither positive {sorted(self.positive_labels)} nor "
-                         f"negative {sorted(self.negative_labels)}; set sentiment.positive_labels / negative_labels")
+                         f"negative {sorted(self.negative_labels)} nor {NEUTRAL_LABEL}; "
+                         f"set sentiment.positive_labels / negative_labels")
 
     def decide(self, transcript: str, classify: Callable[[str], tuple[str, float]] | None) -> RuleDecision:
         words = words_of(transcript)
@@ -69,6 +90,9 @@ class RuleLayer:
         kv = self.keyword_value(content)
         if kv is not None:
             return RuleDecision(kv, "keyword", tuple(words))
+        vote = self.vote_value(content)
+        if vote is not None:
+            return RuleDecision(vote, "keyword_vote", tuple(words))
         if classify is None:   # keyword-only mode: what the rules cannot decide gives no feedback
             return RuleDecision(0.0, "no_classifier", tuple(words))
         label, score = classify(" ".join(content))

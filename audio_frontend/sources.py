@@ -67,6 +67,36 @@ def resample(x: np.ndarray, sr_in: int, sr_out: int) -> np.ndarray:
     return resample_poly(x, sr_out // g, sr_in // g).astype(np.float32)
 
 
+def wav_truncation(path: str | Path) -> tuple[float, float] | None:
+    """(seconds the RIFF/WAVE header declares, seconds the file holds) when the data chunk is cut short;
+    None for a complete file, a streamed header (size 0 or 0xFFFFFFFF), or a file that is not RIFF/WAVE."""
+    import struct
+
+    with open(path, "rb") as fh:
+        head = fh.read(12)
+        if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
+            return None
+        size_total = Path(path).stat().st_size
+        block_align, rate = 0, 0
+        while True:
+            hdr = fh.read(8)
+            if len(hdr) < 8:
+                return None
+            cid, size = hdr[:4], struct.unpack("<I", hdr[4:])[0]
+            if cid == b"fmt ":
+                fmt = fh.read(min(size, 16))
+                if len(fmt) >= 14:
+                    _tag, _ch, rate, _bps, block_align = struct.unpack("<HHIIH", fmt[:14])
+                fh.seek(size - len(fmt) + (size & 1), 1)
+                continue
+            if cid == b"data":
+                present = size_total - fh.tell()
+                if size in (0, 0xFFFFFFFF) or size <= present or not (block_align and rate):
+                    return None
+                return size / block_align / rate, present / block_align / rate
+            fh.seek(size + (size & 1), 1)
+
+
 def load_wav(path: str | Path, sample_rate: int = 16000, on_wrong_rate: str = "convert",
              on_multichannel: str = "convert", on_clipped: str = "warn", clip_fraction: float = 0.01,
              allow_silent: bool = True) -> np.ndarray:
@@ -83,6 +113,11 @@ def load_wav(path: str | Path, sample_rate: int = 16000, on_wrong_rate: str = "c
         raise AudioInputError(f"{path}: no such file")
     if path.stat().st_size == 0:
         raise AudioInputError(f"{path}: the file is empty (0 bytes)")
+    cut = wav_truncation(path)
+    if cut is not None:
+        raise AudioInputError(f"{path}: truncated: its header declares {cut[0]:.2f} s of audio but the file holds "
+                              f"{cut[1]:.2f} s (an interrupted recording or copy); copy it again, or keep what is "
+                              f"there with: sox {path.name} fixed.wav")
     try:
         data, sr = sf.read(str(path), dtype="float32", always_2d=True)
     except (sf.LibsndfileError, RuntimeError, ValueError) as e:

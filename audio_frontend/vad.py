@@ -7,6 +7,9 @@ the utterances that end with that chunk. The speech/no-speech decision per chunk
   floor measured over the first chunks.
 - `WebrtcDetector`: webrtcvad (Google's WebRTC GMM VAD) on the chunk's 30 ms frames; a chunk counts as
   speech when a given fraction of its frames are voiced.
+- `SileroDetector`: silero-vad (a small neural VAD; its wheel ships the model, run with torch) on 32 ms
+  frames; a chunk counts as speech when a given fraction of its frames have speech probability above a
+  threshold. The network is stateful across frames, as in a stream.
 
 Segmentation: an utterance starts after `onset_chunks` speech chunks in a row; `pre_roll_s` of audio from
 before the onset is kept (first phonemes). It then either ends after `hangover_s` of non-speech
@@ -34,6 +37,7 @@ class Segment:
     sample_rate: int
     reason: str            # "quiet" (endpoint), "window" (fixed), "max_length", "flush"
     levels_dbfs: list[float] = field(default_factory=list)
+    t_emit: float = 0.0    # wall-clock end of the chunk that closed the segment (when a live VAD emits it)
 
     @property
     def duration_s(self) -> float:
@@ -95,7 +99,43 @@ class WebrtcDetector:
         return voiced / len(frames) >= self.speech_fraction
 
 
+class SileroDetector:
+    def __init__(self, threshold: float = 0.5, speech_fraction: float = 0.3):
+        try:
+            import torch
+            from silero_vad import load_silero_vad
+        except ImportError as e:
+            raise ImportError(f"vad.kind=silero needs torch and silero-vad ({e}); pip install 'mjx-protamer[audio]' "
+                              f"or use vad.kind=rms") from None
+        self._torch = torch
+        self._model = load_silero_vad()     # the TorchScript model inside the wheel: no download
+        self.threshold = threshold
+        self.speech_fraction = speech_fraction
+        self._carry = np.zeros(0, np.float32)
+        self._rate: int | None = None
+        self.ready = True
+
+    def is_speech(self, chunk: np.ndarray, sample_rate: int) -> bool:
+        if sample_rate not in (8000, 16000):
+            raise ValueError(f"silero-vad supports 8 and 16 kHz, not {sample_rate} Hz")
+        if self._rate != sample_rate:
+            self._model.reset_states()
+            self._rate = sample_rate
+        n = 512 if sample_rate == 16000 else 256
+        x = np.concatenate([self._carry, np.asarray(chunk, np.float32)])
+        m = x.size // n
+        self._carry = x[m * n:]
+        if m == 0:
+            return False
+        with self._torch.inference_mode():
+            probs = [float(self._model(self._torch.from_numpy(x[i * n:(i + 1) * n].copy()), sample_rate))
+                     for i in range(m)]
+        return sum(p >= self.threshold for p in probs) / m >= self.speech_fraction
+
+
 def make_detector(vad_config):
+    if vad_config.kind == "silero":
+        return SileroDetector(vad_config.silero_threshold, vad_config.silero_speech_fraction)
     if vad_config.kind == "webrtc":
         return WebrtcDetector(vad_config.webrtc_aggressiveness, vad_config.webrtc_speech_fraction)
     return RmsDetector(vad_config.threshold_dbfs, vad_config.threshold_mode, vad_config.noise_floor_margin_db,
@@ -122,7 +162,7 @@ class Segmenter:
     def active(self) -> bool:
         return self._active
 
-    def _emit(self, reason: str) -> Segment | None:
+    def _emit(self, reason: str, t_emit: float) -> Segment | None:
         chunks, self._chunks = self._chunks, []
         self._active = False
         self._loud_run = 0
@@ -143,7 +183,7 @@ class Segmenter:
         audio = audio[:max_n]
         seg = Segment(audio=audio, t_start=t_start, t_end=t_start + audio.size / self.sample_rate,
                       t_onset=self._t_onset, sample_rate=self.sample_rate, reason=reason,
-                      levels_dbfs=[e[3] for e in chunks])
+                      levels_dbfs=[e[3] for e in chunks], t_emit=t_emit)
         if seg.duration_s < self.cfg.min_segment_s - 1e-9:
             self.dropped_short += 1
             return None
@@ -181,7 +221,7 @@ class Segmenter:
             if reason is None and length_from_onset + cfg.pre_roll_s >= cfg.max_segment_s - 1e-9:
                 reason = "max_length"
             if reason is not None:
-                seg = self._emit(reason)
+                seg = self._emit(reason, t_now)
                 if seg is not None:
                     out.append(seg)
         return out
@@ -190,7 +230,8 @@ class Segmenter:
         """End of stream: emit the utterance in progress, if any."""
         if not self._active or not self._chunks:
             return []
-        seg = self._emit("flush")
+        last_t, last_chunk = self._chunks[-1][0], self._chunks[-1][1]
+        seg = self._emit("flush", last_t + last_chunk.size / self.sample_rate)
         return [seg] if seg is not None else []
 
 

@@ -11,6 +11,7 @@ import importlib
 import sys
 
 from mjx_protamer.config import ConfigError
+from mjx_protamer.errors import CheckpointError, OutOfMemoryEstimate
 
 # Each module registers one or more subcommands; the order is the order shown in --help.
 COMMAND_MODULES = (
@@ -41,6 +42,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.handler(args) or 0)
     except ConfigError as e:
         print(f"protamer: configuration error: {e}", file=sys.stderr)
+        return 2
+    except CheckpointError as e:
+        print(f"protamer: checkpoint error: {e}", file=sys.stderr)
+        return 2
+    except OutOfMemoryEstimate as e:
+        print(f"protamer: not enough memory: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("protamer: interrupted", file=sys.stderr)

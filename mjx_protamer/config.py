@@ -4,12 +4,18 @@ Every config in the project is a (nested) frozen dataclass. `load_config(Cls, pa
 reads `configs/*.yaml`, applies `a.b.c=value` overrides from the command line and builds the
 dataclass, refusing unknown keys, wrong types and values outside the allowed range. Field-level
 rules live next to the fields, in each dataclass's `validate()` method, which raises
-`ConfigError` through `check()`.
+`ConfigError` through `check()`; one rule holds for every field here: a float is finite (NaN or inf in
+any weight, rate or threshold would silently turn training into NaN).
+
+YAML is read as YAML 1.2 reads numbers: `1e-4` is a float (PyYAML's YAML 1.1 resolver wants `1.0e-4`
+and returns the string '1e-4' otherwise).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import re
 import types
 import typing
 from pathlib import Path
@@ -22,6 +28,31 @@ T = TypeVar("T")
 
 class ConfigError(ValueError):
     """A configuration value is missing, unknown or invalid; the message names the field."""
+
+
+class _Yaml12Loader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2's float syntax: `1e-4`, `5E3`, `.5`, `-1.` are floats (as in JSON)."""
+
+
+_Yaml12Loader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+for _first in "-+.0123456789":
+    _Yaml12Loader.yaml_implicit_resolvers[_first] = [(tag, rx) for tag, rx in
+                                                     _Yaml12Loader.yaml_implicit_resolvers.get(_first, [])
+                                                     if tag != "tag:yaml.org,2002:float"]
+_Yaml12Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                    |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                    |[-+]?\.(?:inf|Inf|INF)
+                    |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+.0123456789"),
+)
+
+
+def yaml_load(text: str) -> Any:
+    """Parse YAML text with YAML 1.2 numbers (every config file and `--set` value goes through here)."""
+    return yaml.load(text, Loader=_Yaml12Loader)
 
 
 def check(condition: bool, field: str, message: str) -> None:
@@ -72,6 +103,10 @@ def _coerce(value: Any, tp: Any, field: str) -> Any:
     if dataclasses.is_dataclass(tp):
         if isinstance(value, tp):
             return value
+        if isinstance(value, str) and hasattr(tp, "preset"):  # a named preset, e.g. `reward: paper`
+            return tp.preset(value)
+        if value is None:  # an empty section (`pretrain:` and nothing under it): the defaults
+            value = {}
         if not isinstance(value, dict):
             raise ConfigError(f"config field '{field}': expected a mapping, got {value!r}")
         return _build(tp, value, prefix=f"{field}.")
@@ -87,6 +122,8 @@ def _coerce(value: Any, tp: Any, field: str) -> Any:
         raise ConfigError(f"config field '{field}': expected an integer, got {value!r}")
     if tp is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if not math.isfinite(value):
+                raise ConfigError(f"config field '{field}': must be a finite number, got {value!r}")
             return float(value)
         raise ConfigError(f"config field '{field}': expected a number, got {value!r}")
     if tp is str:
@@ -105,6 +142,10 @@ def _build(cls: type[T], raw: dict[str, Any], prefix: str = "") -> T:
             f"unknown config key(s) {', '.join(prefix + k for k in unknown)}; "
             f"allowed keys under '{prefix.rstrip('.') or cls.__name__}': {', '.join(sorted(names))}"
         )
+    required = [f.name for f in dataclasses.fields(cls)
+                if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING and f.name not in raw]
+    if required:
+        raise ConfigError(f"config field(s) {', '.join(prefix + k for k in required)} missing: they have no default")
     kwargs = {k: _coerce(v, hints[k], prefix + k) for k, v in raw.items()}
     obj = cls(**kwargs)
     validate(obj, prefix)
@@ -128,7 +169,10 @@ def validate(obj: Any, prefix: str = "") -> None:
 
 
 def _parse_scalar(text: str) -> Any:
-    return yaml.safe_load(text)
+    try:
+        return yaml_load(text)
+    except yaml.YAMLError:
+        return text  # not YAML on its own (e.g. `a: b` quoting trouble): the field's type check names it
 
 
 def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
@@ -158,9 +202,13 @@ def to_dict(obj: Any) -> dict[str, Any]:
     return conv(obj)
 
 
-def from_dict(cls: type[T], raw: dict[str, Any] | None) -> T:
-    """Build and validate a config dataclass from a nested dict (missing keys take defaults)."""
-    return _build(cls, dict(raw or {}))
+def from_dict(cls: type[T], raw: dict[str, Any] | None, section: str = "") -> T:
+    """Build and validate a config dataclass from a nested dict (missing keys take defaults); `section` names
+    where the dict came from in error messages (e.g. 'feedback' for the feedback section of a file)."""
+    if raw is not None and not isinstance(raw, dict):
+        raise ConfigError(f"config section '{section or cls.__name__}' must be a mapping (key: value lines), "
+                          f"got {raw!r}")
+    return _build(cls, dict(raw or {}), prefix=f"{section}." if section else "")
 
 
 def read_raw(path: str | Path | None = None, overrides: list[str] | None = None) -> dict[str, Any]:
@@ -171,11 +219,20 @@ def read_raw(path: str | Path | None = None, overrides: list[str] | None = None)
         if not path.is_file():
             raise ConfigError(f"config file {path} does not exist")
         try:
-            raw = yaml.safe_load(path.read_text()) or {}
+            raw = yaml_load(path.read_text())
         except yaml.YAMLError as e:
-            raise ConfigError(f"config file {path} is not valid YAML: {e}") from None
+            where = getattr(e, "problem_mark", None)
+            at = f" (line {where.line + 1}, column {where.column + 1})" if where is not None else ""
+            problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+            raise ConfigError(f"config file {path} is not valid YAML{at}: {problem}") from None
+        except UnicodeDecodeError:
+            raise ConfigError(f"config file {path} is not a text (UTF-8) file") from None
+        if raw is None:
+            raise ConfigError(f"config file {path} is empty; give at least one section, "
+                              "or leave out the file to use the built-in defaults")
         if not isinstance(raw, dict):
-            raise ConfigError(f"config file {path} must hold a mapping at the top level")
+            raise ConfigError(f"config file {path} must hold a mapping (key: value lines) at the top level, "
+                              f"not a {type(raw).__name__}")
     return apply_overrides(raw, list(overrides or []))
 
 

@@ -22,6 +22,8 @@ BENCHMARKS = {
                  "position-servo tracking error on held random targets (free space and blocked)"),
     "voice": ("audio_frontend.bench", "run_voice_benchmark",
               "latency from end of utterance to feedback event, prosody and Whisper"),
+    "vad": ("audio_frontend.vad_compare", "run_vad_benchmark",
+            "misses and false alarms of the rms, webrtc and silero VADs on synthesised sessions with noise"),
 }
 
 

@@ -33,7 +33,9 @@ session_chunks.jsonl: the checkpoint's hash, seeds, config, every drained event 
 `--replay DIR --out NEW` reruns it headless to the same final parameters, bit for bit.
 
 Exit codes: 0 normal end, 130 Ctrl-C / 143 SIGTERM (after saving), 2 a bad argument, checkpoint or terminal,
-the voice front end's codes (3 audio input, 4 audio device) when the audio source is unusable.
+the voice front end's codes (3 audio input, 4 audio device, 5 missing weights, 6 calibration) when the audio
+source, weights or calibration are unusable (checked before loading), or, at the end of a session that went on
+without it, when the voice listener died.
 """
 
 from __future__ import annotations
@@ -190,6 +192,9 @@ def _finetune(args: argparse.Namespace) -> int:
         from audio_frontend.errors import VoiceError
         try:
             voice = _voice_setup(args)
+            from audio_frontend.preflight import check_voice_feedback  # calibration, weights: fail before loading
+            print("[finetune] voice: " + "; ".join(check_voice_feedback(voice[0], args.feedback, args.keywords_only)),
+                  flush=True)
         except VoiceError as e:
             from audio_frontend.errors import AudioDeviceError
             hint = " (here: --listen-source wav:PATH)" if isinstance(e, AudioDeviceError) else ""
@@ -198,10 +203,11 @@ def _finetune(args: argparse.Namespace) -> int:
     if not ckpt.exists():
         return _fail(f"--checkpoint {ckpt}: no such file or directory. Give a pretrain run directory "
                      f"(made by `protamer pretrain --out DIR`) or a finetune output directory.")
-    from mjx_protamer.experiments.evaluate import resolve_checkpoint
+    from mjx_protamer.errors import CheckpointError
+    from mjx_protamer.experiments.run_loader import resolve_checkpoint
     try:
         resolve_checkpoint(ckpt)
-    except FileNotFoundError as e:
+    except CheckpointError as e:
         return _fail(f"--checkpoint: {e} (expected DIR/config.yaml and DIR/checkpoints/<step>/)")
 
     from mjx_protamer.commands.train import _enable_compile_cache
@@ -210,6 +216,8 @@ def _finetune(args: argparse.Namespace) -> int:
     print(f"[finetune] loading {ckpt} (the first chunk compiles: this can take a minute or two)", flush=True)
     try:
         loaded = _load(args, ckpt)
+    except CheckpointError as e:
+        return _fail(f"--checkpoint: {e}")
     except (FileNotFoundError, ValueError, KeyError) as e:
         return _fail(f"--checkpoint {ckpt} cannot be loaded: {type(e).__name__}: {e}")
     except Exception as e:  # orbax / msgpack errors of a truncated or foreign checkpoint
@@ -222,8 +230,20 @@ def _finetune(args: argparse.Namespace) -> int:
 
 def _load(args, ckpt: Path):
     """(pretrain config, env, loaded train state, step)."""
-    from mjx_protamer.experiments.evaluate import load_run
+    from mjx_protamer.experiments.run_loader import load_run
     return load_run(ckpt)
+
+
+def _with_feedback_channel(fb, feedback: str):
+    """Credit (and a simulated teacher) use the delay model of the channel the feedback comes through."""
+    import dataclasses
+
+    from mjx_protamer.human.teachers import with_channel
+
+    kind = {"whisper": "speech", "prosody": "prosody"}.get(feedback)
+    if feedback.startswith("simulated:"):
+        kind = feedback.split(":", 1)[1]
+    return fb if kind is None else dataclasses.replace(fb, teacher=with_channel(fb.teacher, kind))
 
 
 # --------------------------------------------------------------------------- resume
@@ -304,7 +324,7 @@ def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, fe
 
 def _checkpoint_identity(ckpt: Path, step: int) -> dict:
     """The checkpoint a session starts from: its step directory and the SHA-256 of its files."""
-    from mjx_protamer.experiments.evaluate import resolve_checkpoint
+    from mjx_protamer.experiments.run_loader import resolve_checkpoint
     from mjx_protamer.human.session_record import tree_sha256
 
     run_dir, ckpt_dir, _ = resolve_checkpoint(ckpt)
@@ -328,7 +348,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
         chunk_ms = manifest["chunk_ms"]
     else:
         overrides, config_path, chunk_ms = args.overrides, args.config, args.chunk_ms
-    fb = load_feedback_config(config_path, overrides).feedback
+    fb = _with_feedback_channel(load_feedback_config(config_path, overrides).feedback, args.feedback)
     chunk_steps = max(1, round(chunk_ms / 1000.0 / fb.dt))
     out = args.out or Path("runs") / time.strftime("finetune-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
@@ -360,7 +380,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
 
     view_kind = args.view or default_view()
     keys = listener = stop_event = view = None
-    listener_said = wav_over = False
+    listener_said = wav_over = listener_died = False
     interrupted = False
     last_event = None
     with _Stopper() as stopper:
@@ -453,6 +473,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                 said = listener_status(listener)
                 if said is not None and not listener_said and listener.exitcode != 0:
                     print(f"[finetune] {said}", flush=True)
+                listener_died = listener.exitcode not in (None, 0)  # before we stop it ourselves
                 stop_event.set()
                 listener.join(2.0)
                 if listener.is_alive():
@@ -471,6 +492,10 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                   f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
     if stopper.signum is not None:
         return 128 + stopper.signum  # 130 for Ctrl-C, 143 for SIGTERM
+    if listener_died and not interrupted:  # the run went on without voice feedback: not a success
+        print(f"[finetune] exit code {max(listener.exitcode, 1)}: the voice listener died during the session "
+              f"(see above); everything up to then is saved", flush=True)
+        return max(listener.exitcode, 1)
     return 130 if interrupted else 0
 
 

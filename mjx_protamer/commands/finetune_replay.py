@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mjx_protamer.commands.feedback import _build_run, _fail, _load, _save
+from mjx_protamer.commands.feedback import _build_run, _fail, _load, _save, _with_feedback_channel
 
 
 def replay(args) -> int:
@@ -47,7 +47,8 @@ def replay(args) -> int:
 
     _enable_compile_cache()
     pre, env, loaded, step = _load(args, step_dir)
-    fb = load_feedback_config(manifest["config"], manifest["overrides"]).feedback
+    fb = _with_feedback_channel(load_feedback_config(manifest["config"], manifest["overrides"]).feedback,
+                                manifest["feedback"])
     args.out.mkdir(parents=True, exist_ok=True)
     mode = None if manifest["feedback"] == "none" else "queue"
     run, saved_config = _build_run(args, pre, env, loaded, step, fb, manifest["chunk_steps"], args.out, mode,

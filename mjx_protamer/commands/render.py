@@ -41,7 +41,7 @@ def _fail(msg: str) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from mjx_protamer.experiments.evaluate import resolve_checkpoint
+    from mjx_protamer.experiments.run_loader import resolve_checkpoint
     from mjx_protamer.view.video import check_path
 
     if args.episodes < 1:

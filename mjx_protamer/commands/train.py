@@ -65,7 +65,7 @@ def _enable_compile_cache() -> None:
 
 def _pretrain(args: argparse.Namespace) -> int:
     from mjx_protamer.agents.ddpg.config import PretrainConfig
-    from mjx_protamer.config import ConfigError, apply_overrides, from_dict, load_config, to_dict
+    from mjx_protamer.config import ConfigError, apply_overrides, from_dict, load_config, read_raw, to_dict
 
     if args.resume and args.out is None:
         raise ConfigError("--resume needs --out, the run directory to continue")
@@ -75,17 +75,13 @@ def _pretrain(args: argparse.Namespace) -> int:
         raise ConfigError("--feedback-config and --set feedback.*/batched.* need --feedback simulated:KIND")
     fb_raw: dict = {}
     if args.feedback_config is not None:
-        import yaml
-
-        if not args.feedback_config.is_file():
-            raise ConfigError(f"config file {args.feedback_config} does not exist")
-        fb_raw = yaml.safe_load(args.feedback_config.read_text()) or {}
+        fb_raw = read_raw(args.feedback_config)
         unknown = sorted(set(fb_raw) - {"pretrain", "feedback", "batched"})
         if unknown:
             raise ConfigError(f"{args.feedback_config}: unknown key(s) {', '.join(unknown)}; "
                               "allowed keys: pretrain, feedback, batched")
     if args.config is None and "pretrain" in fb_raw:
-        config = from_dict(PretrainConfig, apply_overrides(fb_raw["pretrain"] or {}, overrides))
+        config = from_dict(PretrainConfig, apply_overrides(_section(fb_raw, "pretrain"), overrides), "pretrain")
     elif args.config is None:  # overrides apply on top of the whole built-in default, section by section
         config = from_dict(PretrainConfig, apply_overrides(to_dict(PretrainConfig()), overrides))
     else:
@@ -116,10 +112,10 @@ def _feedback_setup(spec: str, raw: dict, overrides: list[str]):
     from mjx_protamer.human.teachers import with_channel
 
     kind = parse_feedback(spec)
-    sections = {"feedback": raw.get("feedback") if "feedback" in raw else to_dict(default_feedback_config(kind)),
-                "batched": raw.get("batched") or {}}
+    sections = {"feedback": _section(raw, "feedback") if "feedback" in raw else to_dict(default_feedback_config(kind)),
+                "batched": _section(raw, "batched")}
     apply_overrides(sections, overrides)
-    fb = from_dict(FeedbackConfig, sections["feedback"])
+    fb = from_dict(FeedbackConfig, sections["feedback"], "feedback")
     file_kind = fb.teacher.channel.kind
     fb = dataclasses.replace(fb, teacher=with_channel(fb.teacher, kind))
     if "feedback" in raw and file_kind != kind:
@@ -128,7 +124,20 @@ def _feedback_setup(spec: str, raw: dict, overrides: list[str]):
     note = step_window_note(kind, fb.credit, fb.dt)
     if note:
         print(note, file=sys.stderr)
-    return FeedbackSetup(kind, fb, from_dict(BatchedFeedbackConfig, sections["batched"]))
+    return FeedbackSetup(kind, fb, from_dict(BatchedFeedbackConfig, sections["batched"], "batched"))
+
+
+def _section(raw: dict, name: str) -> dict:
+    """A section of a config file as a dict ({} when absent or empty), refused with its name when it is not
+    a mapping."""
+    from mjx_protamer.config import ConfigError
+
+    value = raw.get(name)
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ConfigError(f"config section '{name}' must be a mapping (key: value lines), got {value!r}")
+    return value
 
 
 def _eval(args: argparse.Namespace) -> int:
@@ -142,7 +151,7 @@ def _eval(args: argparse.Namespace) -> int:
     from mjx_protamer.experiments import metrics
     from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
 
-    # Library chatter on stdout (mujoco.mjx prints "Failed to import warp") must not corrupt --json.
+    # Library chatter on stdout must not corrupt --json (mujoco.mjx's warp notice is already dropped: quiet_mjx).
     with contextlib.redirect_stdout(sys.stderr):
         config, env, state, step = load_run(args.checkpoint)
         seed = eval_seed(config) if args.seed is None else args.seed
@@ -168,7 +177,7 @@ def _prepare_body_map_gl(checkpoint) -> None:
 
     try:
         prepare_gl_for(checkpoint)
-    except (GLUnavailable, FileNotFoundError, OSError):
+    except (GLUnavailable, FileNotFoundError, OSError, ValueError):  # ValueError: CheckpointError
         pass
 
 
@@ -177,7 +186,7 @@ def _body_map(args, config, summary):
     (then a note on stderr: the metrics still count)."""
     if config.env_name == "toy" or (args.body_map or "").lower() == "none":
         return None
-    from mjx_protamer.experiments.evaluate import resolve_checkpoint
+    from mjx_protamer.experiments.run_loader import resolve_checkpoint
     from mjx_protamer.view.bodymap import write_body_map
     from mjx_protamer.view.gl import GLUnavailable
 

@@ -30,7 +30,13 @@ class TouchConfig:
 
 @dataclasses.dataclass(frozen=True)
 class RewardConfig:
-    """Weights of the intrinsic reward terms (0 switches a term off) and the terms' constants."""
+    """Weights of the intrinsic reward terms (0 switches a term off) and the terms' constants.
+
+    The defaults are this project's infant preset; `reward: paper` in a config selects `RewardConfig.paper()`,
+    the reference reward of the spec, kept for reproduction. What differs and why (docs/experiments.md):
+    contact pays for touching (saturates near 1 N) rather than for pressing (20 N); novelty reads the touch
+    features squashed by `novelty_force_scale` and clipped, so force chatter cannot outweigh touching.
+    """
 
     contact: float = 1.0
     novelty: float = 1.0
@@ -38,8 +44,10 @@ class RewardConfig:
     movement: float = 1.0
     energy: float = 1.0
     joint_limit: float = 1.0
-    contact_scale: float = 4.0
-    contact_gain: float = 0.05
+    contact_scale: float = 1.0
+    contact_gain: float = 2.0
+    novelty_force_scale: float = 1.0  # N; features enter novelty as tanh(x / scale); 0: raw features (paper)
+    novelty_clip: float = 1.0  # novelty is at most this; 0: unclipped (paper)
     region_new: float = 0.3
     region_stale: float = -1.0
     speed_low: float = 1.0
@@ -49,11 +57,25 @@ class RewardConfig:
     limit_threshold: float = 0.8
     limit_coef: float = 0.8
 
+    PRESETS = ("infant", "paper")
+
+    @staticmethod
+    def preset(name: str) -> "RewardConfig":
+        if name == "infant":
+            return RewardConfig()
+        if name == "paper":
+            return RewardConfig(contact_scale=4.0, contact_gain=0.05, novelty_force_scale=0.0, novelty_clip=0.0)
+        from mjx_protamer.config import ConfigError
+        raise ConfigError(f"config field 'reward': unknown preset {name!r}; presets: {', '.join(RewardConfig.PRESETS)}")
+
     def validate(self) -> None:
         check(0 <= self.speed_low < self.speed_high, "speed_low",
               f"must satisfy 0 <= speed_low < speed_high, got {self.speed_low}, {self.speed_high}")
         check(0 <= self.limit_threshold < 1, "limit_threshold", f"must be in [0, 1), got {self.limit_threshold}")
         check(self.contact_gain > 0, "contact_gain", f"must be > 0, got {self.contact_gain}")
+        check(self.novelty_force_scale >= 0, "novelty_force_scale",
+              f"must be >= 0 N (0: raw features), got {self.novelty_force_scale}")
+        check(self.novelty_clip >= 0, "novelty_clip", f"must be >= 0 (0: no clip), got {self.novelty_clip}")
 
     def weights(self) -> tuple[float, ...]:
         return (self.contact, self.novelty, self.region, self.movement, self.energy, self.joint_limit)
@@ -71,6 +93,14 @@ class EnvConfig:
     torque_actuators: tuple[str, ...] = tuple(f"{s}_{j}" for s in _SIDES for j in _ARM)
     speed_joints: tuple[str, ...] = tuple(f"{s}_{j}" for s in _SIDES for j in _ARM)
     freeze_speed: float = 1.0
+    # Time constant (s) of the low-pass between the action and the servo targets (model.next_ctrl); 0 is
+    # the paper's env, where targets jump to each 5 ms action. See docs/experiments.md for why 0.1 s.
+    action_filter_s: float = 0.1
+    # Frequency (Hz) of a phase signal [sin, cos](2 pi f t) appended to the observation; 0 keeps the paper's
+    # 84 dims. Infants' spontaneous "general movements" are rhythmic (central pattern generators, as in
+    # Kuniyoshi & Sangawa's fetal self-touch models); a deterministic policy with no clock can only settle
+    # into a fixed pose once its exploration noise is off, one with a clock can keep moving.
+    oscillator_hz: float = 1.0
     reset_noise_steps: int = 10
     reset_noise_scale: float = 0.1
     reset_pool_size: int = 256
@@ -89,11 +119,23 @@ class EnvConfig:
             check(not bad, field, f"unknown joint(s) {bad}; allowed: {', '.join(ALL_JOINTS)}")
         bad = [n for n in self.torque_actuators if n not in body.ACTUATED_JOINTS]
         check(not bad, "torque_actuators", f"unknown actuator(s) {bad}; allowed: {', '.join(body.ACTUATED_JOINTS)}")
+        check(0 <= self.action_filter_s <= 2, "action_filter_s",
+              f"must be in [0, 2] s (0: no filter), got {self.action_filter_s}")
+        check(0 <= self.oscillator_hz <= 20, "oscillator_hz", f"must be in [0, 20] Hz (0: off), got {self.oscillator_hz}")
         check(self.freeze_speed > 0, "freeze_speed", f"must be > 0 rad/s, got {self.freeze_speed}")
         check(0 <= self.reset_noise_steps <= 200, "reset_noise_steps", f"must be in [0, 200], got {self.reset_noise_steps}")
         check(0 <= self.reset_noise_scale <= 1, "reset_noise_scale", f"must be in [0, 1], got {self.reset_noise_scale}")
         check(1 <= self.reset_pool_size <= 4096, "reset_pool_size", f"must be in [1, 4096], got {self.reset_pool_size}")
 
     @property
+    def action_smoothing(self) -> float:
+        """exp(-dt / action_filter_s): the weight of the previous servo target in model.next_ctrl."""
+        import math
+        if self.action_filter_s == 0:
+            return 0.0
+        return math.exp(-self.physics.timestep / self.action_filter_s)
+
+    @property
     def observation_size(self) -> int:
-        return 4 * (self.k + 3) + len(self.qpos_joints) + len(self.qvel_joints) + len(self.torque_actuators)
+        return (4 * (self.k + 3) + len(self.qpos_joints) + len(self.qvel_joints) + len(self.torque_actuators)
+                + (2 if self.oscillator_hz > 0 else 0))

@@ -51,6 +51,16 @@ class SelfTouchModel:
         a = xp.clip(action, -1.0, 1.0)
         return self.ctrl_lo + 0.5 * (a + 1.0) * (self.ctrl_hi - self.ctrl_lo)
 
+    def next_ctrl(self, xp, prev_ctrl, action, smoothing: float):
+        """The servo targets of the next step: the action's targets through a first-order low-pass.
+
+        `smoothing` is exp(-dt / tau) (0: the targets jump to the action, the paper's servos). Stiff position
+        servos at 200 Hz turn any jump of the target into a fast jerk, so a policy (or exploration noise)
+        that changes its action every 5 ms moves the arm at 10-20 rad/s; the low-pass makes the commanded
+        motion human-scale while the servos still track what is commanded.
+        """
+        return smoothing * prev_ctrl + (1.0 - smoothing) * self.action_to_ctrl(xp, action)
+
 
 def _name_ids(m: mujoco.MjModel, obj: mujoco.mjtObj, names) -> np.ndarray:
     ids = [mujoco.mj_name2id(m, obj, n) for n in names]
@@ -118,9 +128,15 @@ def _start_pool(m: mujoco.MjModel, settled: mujoco.MjData, rest: np.ndarray, con
     return tuple(np.stack(x) for x in out)
 
 
-def observe(xp, model: SelfTouchModel, touch, qpos, qvel, actuator_force):
-    """The observation: [s_left(k), s_right(k), s_qpos, s_qvel, s_torque]."""
-    return xp.concatenate([touch, qpos[model.qpos_idx], qvel[model.qvel_idx], actuator_force[model.torque_idx]])
+def observe(xp, model: SelfTouchModel, touch, qpos, qvel, actuator_force, time=0.0, oscillator_hz: float = 0.0):
+    """The observation: [s_left(k), s_right(k), s_qpos, s_qvel, s_torque] (the paper's 84 dims), then, with
+    an oscillator, [sin, cos] of its phase 2 pi f t (t the episode time): a rhythm generator the policy can
+    drive movement from (see EnvConfig.oscillator_hz)."""
+    parts = [touch, qpos[model.qpos_idx], qvel[model.qvel_idx], actuator_force[model.torque_idx]]
+    if oscillator_hz > 0:
+        phase = 2.0 * math.pi * oscillator_hz * time
+        parts.append(xp.stack([xp.sin(phase), xp.cos(phase)]).astype(touch.dtype))
+    return xp.concatenate(parts)
 
 
 def arm_speed(xp, model: SelfTouchModel, qvel):

@@ -12,7 +12,13 @@ from mjx_protamer.envs.config import RewardConfig
 
 def reward_terms(xp, cfg: RewardConfig, touch, prev_touch, regions, prev_regions, arm_speed, torque, action):
     contact = cfg.contact_scale * xp.tanh(cfg.contact_gain * xp.sum(xp.abs(touch)))
-    novelty = xp.sqrt(xp.sum((touch - prev_touch) ** 2))
+    if cfg.novelty_force_scale > 0:
+        now, before = xp.tanh(touch / cfg.novelty_force_scale), xp.tanh(prev_touch / cfg.novelty_force_scale)
+    else:
+        now, before = touch, prev_touch
+    novelty = xp.sqrt(xp.sum((now - before) ** 2))
+    if cfg.novelty_clip > 0:
+        novelty = xp.minimum(novelty, cfg.novelty_clip)
     # New regions: the touched set is not a subset of the previous step's set.
     new_region = xp.any(regions & ~prev_regions)
     region = xp.where(new_region, cfg.region_new, cfg.region_stale)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from mujoco import mjx
+from mjx_protamer.quiet_mjx import mjx  # mujoco.mjx, without its "Failed to import warp" notice
 
 from mjx_protamer.envs import body, sensing
 from mjx_protamer.envs.base import State
@@ -76,7 +76,7 @@ class SelfTouchEnv:
         speed = arm_speed(jnp, self.model, d.qvel)
         terms = reward_terms(jnp, self.config.reward, touch, prev_touch, regions, prev_regions, speed,
                              d.actuator_force, action)
-        obs = observe(jnp, self.model, touch, d.qpos, d.qvel, d.actuator_force)
+        obs = observe(jnp, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz)
         metrics = {
             "reward_terms": terms,
             "self_contact": jnp.any(regions).astype(jnp.float32),
@@ -106,7 +106,7 @@ class SelfTouchEnv:
     def step(self, state: State, action: jax.Array) -> State:
         if action.shape != (self.action_size,):
             raise ValueError(f"action must have shape ({self.action_size},) per env, got {action.shape}")
-        ctrl = self.model.action_to_ctrl(jnp, action).astype(jnp.float32)
+        ctrl = self.model.next_ctrl(jnp, state.data.ctrl, action, self.config.action_smoothing).astype(jnp.float32)
         d = mjx.step(self.mjx_model, state.data.replace(ctrl=ctrl))
         # A diverged env must not poison the batch: its outputs are zeroed, its integrated state is
         # restored to the settled start (the rest of mjx.Data is recomputed from it by the next

@@ -120,7 +120,7 @@ class SelfTouchTwinEnv(gym.Env):
         speed = arm_speed(np, self.model, d.qvel)
         terms = reward_terms(np, self.config.reward, touch, prev_touch, regions, prev_regions, speed,
                              d.actuator_force, action)
-        obs = observe(np, self.model, touch, d.qpos, d.qvel, d.actuator_force)
+        obs = observe(np, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz)
         return {
             "obs": obs, "reward": float(terms @ self._weights), "reward_terms": terms, "touch": touch,
             "region_mask": regions, "extended_region_mask": extended,
@@ -167,7 +167,7 @@ class SelfTouchTwinEnv(gym.Env):
         if action.shape != (self.action_size,):
             raise ValueError(f"action must have shape ({self.action_size},), got {action.shape}")
         m, d = self.mj_model, self.data
-        d.ctrl[:] = self.model.action_to_ctrl(np, action)
+        d.ctrl[:] = self.model.next_ctrl(np, d.ctrl, action, self.config.action_smoothing)
         warnings = self._bad_state_warnings()
         mujoco.mj_step(m, d)
         # Native MuJoCo catches a diverged state itself (it resets to qpos0 and counts a warning);

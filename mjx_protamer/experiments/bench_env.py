@@ -106,7 +106,7 @@ def _bench_mjx_env(env, batch: int, steps: int, repeats: int, seed: int = 0) -> 
 def _bench_mjx_physics(env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
     import jax
     import jax.numpy as jnp
-    from mujoco import mjx
+    from mjx_protamer.quiet_mjx import mjx
 
     model = env.model
     lo = jnp.asarray(model.ctrl_lo, jnp.float32)

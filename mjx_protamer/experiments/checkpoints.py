@@ -1,17 +1,40 @@
-"""Orbax checkpoints of a whole TrainState (learner, env batch, replay, RNG), written atomically.
+"""Orbax checkpoints of a whole TrainState (learner, env batch, replay, RNG): named leaves, a checksum, atomic.
 
-Orbax writes each step into a temporary directory and renames it when complete, so a run killed while
-saving leaves the previous checkpoint intact; `latest_step` only ever sees finished ones. Saving is
-synchronous: the train step donates its input buffers, so the next chunk must not start before the save ends.
+Leaves are saved under their path in the tree (`actor_params/params/Dense_0/kernel`, `replay/obs`, ...), not
+by position, so a checkpoint restores each array into the field it came from or refuses: reordering or
+renaming fields can never put the actor into the target actor silently.
+
+Beside the arrays, each step directory holds `manifest.json`: every leaf's path, shape and dtype and a
+SHA-256 over the leaves' names and bytes. It is written atomically after orbax has finished the step, so a
+step without it is an unfinished save. `restore` checks the manifest against the structure it restores into
+(a checkpoint of another config is refused and says which leaf differs), then the checksum of what it read
+(a damaged checkpoint is refused with "use the previous one"). `newest_intact` is what `--resume` uses.
+
+Orbax writes each step into a temporary directory and renames it when complete, so a run killed while saving
+leaves the previous checkpoint intact. Saving is synchronous: the train step donates its input buffers, so
+the next chunk must not start before the save ends.
 """
 
 from __future__ import annotations
 
+import gc
+import hashlib
+import json
+import os
+import shutil
+import sys
+import time
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import orbax.checkpoint as ocp
+
+from mjx_protamer.errors import CheckpointDamaged, CheckpointError
+
+MANIFEST = "manifest.json"
+FORMAT = 2  # 1: leaves by flat index, no manifest (before checksums)
 
 
 def manager(directory: str | Path, max_to_keep: int = 2) -> ocp.CheckpointManager:
@@ -19,24 +42,206 @@ def manager(directory: str | Path, max_to_keep: int = 2) -> ocp.CheckpointManage
     return ocp.CheckpointManager(Path(directory).absolute(), options=options)
 
 
-def _items(leaves) -> dict:
-    """The leaves by index, without zero-size arrays (orbax refuses them; mjx.Data has some, e.g. `act`)."""
-    return {f"leaf_{i:05d}": leaf for i, leaf in enumerate(leaves) if leaf.size > 0}
+def _key_name(key) -> str:
+    for attr in ("name", "key", "idx"):
+        if hasattr(key, attr):
+            return str(getattr(key, attr))
+    return str(key)
+
+
+def named_leaves(tree) -> dict[str, object]:
+    """{'a/b/c': leaf} for every leaf of the tree, named by its path."""
+    flat, _ = jax.tree_util.tree_flatten_with_path(tree)
+    return {"/".join(_key_name(k) for k in path): leaf for path, leaf in flat}
+
+
+def _nested(named: dict[str, object]) -> dict:
+    """The named leaves as nested dicts (orbax's natural tree), without zero-size arrays (orbax refuses them;
+    mjx.Data has some, e.g. `act`: they are rebuilt as zeros on restore)."""
+    out: dict = {}
+    for name, leaf in named.items():
+        if leaf.size == 0:
+            continue
+        node = out
+        *parents, last = name.split("/")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[last] = leaf
+    return out
+
+
+def _lookup(nested: dict, name: str):
+    node = nested
+    for p in name.split("/"):
+        node = node[p]
+    return node
+
+
+def _digest(named_arrays: dict[str, np.ndarray]) -> str:
+    h = hashlib.sha256()
+    for name in sorted(named_arrays):
+        a = np.ascontiguousarray(named_arrays[name])
+        h.update(f"{name}:{a.dtype.str}:{a.shape}\n".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _describe(named: dict) -> dict:
+    return {name: {"shape": list(x.shape), "dtype": np.dtype(x.dtype).name} for name, x in named.items()}
+
+
+def step_dir(mngr: ocp.CheckpointManager, step: int) -> Path:
+    return Path(mngr.directory) / str(step)
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    fd = os.open(path.parent, os.O_RDONLY)  # the rename itself is durable once the directory is synced
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def save(mngr: ocp.CheckpointManager, step: int, state) -> None:
-    mngr.save(step, args=ocp.args.StandardSave(_items(jax.tree.leaves(state))))
+    named = named_leaves(state)
+    mngr.save(step, args=ocp.args.StandardSave(_nested(named)))
     mngr.wait_until_finished()
+    host = {name: np.asarray(jax.device_get(x)) for name, x in named.items()}
+    manifest = {"format": FORMAT, "step": int(step), "leaves": _describe(host), "sha256": _digest(host)}
+    _write_atomic(step_dir(mngr, step) / MANIFEST, json.dumps(manifest, indent=1))
+
+
+def _read_manifest(directory: Path) -> dict:
+    path = directory / MANIFEST
+    if not path.is_file():
+        raise CheckpointDamaged(f"no {MANIFEST} (an unfinished save, or a checkpoint written before checksums)")
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+        leaves, digest = manifest["leaves"], manifest["sha256"]
+        if not isinstance(leaves, dict) or not isinstance(digest, str):
+            raise TypeError
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
+        raise CheckpointDamaged(f"its {MANIFEST} is unreadable") from None
+    return manifest
+
+
+def _check_structure(manifest: dict, like_named: dict, directory: Path) -> None:
+    saved, here = manifest["leaves"], _describe(like_named)
+    missing, extra = sorted(set(here) - set(saved)), sorted(set(saved) - set(here))
+    if missing or extra:
+        what = (f"lacks {missing[0]}" if missing else f"has {extra[0]}, which this config does not")
+        more = len(missing) + len(extra) - 1
+        raise CheckpointError(f"checkpoint {directory} does not fit this config: it {what}"
+                              + (f" (and {more} other leaf differences)" if more else "")
+                              + "; load it with the config.yaml of the run that wrote it")
+    for name in sorted(here):
+        if saved[name] != here[name]:
+            raise CheckpointError(
+                f"checkpoint {directory} does not fit this config: {name} is {tuple(saved[name]['shape'])} "
+                f"{saved[name]['dtype']} there but {tuple(here[name]['shape'])} {here[name]['dtype']} here "
+                f"(a different num_envs, observation size or network?); use the run's own config.yaml")
+
+
+def available_steps(directory: str | Path) -> list[int]:
+    directory = Path(directory)
+    if not directory.is_dir():
+        return []
+    return sorted(int(p.name) for p in directory.iterdir() if p.is_dir() and p.name.isdigit())
+
+
+def _previous_hint(mngr: ocp.CheckpointManager, step: int) -> str:
+    earlier = [s for s in available_steps(mngr.directory) if s < step]
+    if not earlier:
+        return "no earlier checkpoint is left: train again, or restore this one from a backup"
+    return f"use the previous one ({step_dir(mngr, earlier[-1])})"
 
 
 def restore(mngr: ocp.CheckpointManager, step: int, like):
-    """Restore into the structure, shapes and shardings of `like` (a state or its eval_shape)."""
-    leaves, treedef = jax.tree.flatten(like)
-    abstract = _items([_abstract(x) for x in leaves])
-    restored = mngr.restore(step, args=ocp.args.StandardRestore(abstract))
-    out = [restored.get(f"leaf_{i:05d}") for i in range(len(leaves))]
-    out = [r if r is not None else _empty(x) for r, x in zip(out, leaves)]
-    return jax.tree.unflatten(treedef, out)
+    """Restore into the structure, shapes and shardings of `like` (a state or its eval_shape), each leaf by
+    its path; CheckpointError when the checkpoint does not fit `like`, CheckpointDamaged when its files are
+    missing, unfinished or corrupt."""
+    directory = step_dir(mngr, step)
+    if not directory.is_dir():
+        steps = available_steps(mngr.directory)
+        have = f"the steps there: {', '.join(map(str, steps))}" if steps else "it holds no checkpoint"
+        raise CheckpointError(f"checkpoint step {step} does not exist in {mngr.directory}; {have}")
+    like_named = named_leaves(like)
+    try:
+        manifest = _read_manifest(directory)
+    except CheckpointDamaged as e:
+        raise CheckpointDamaged(f"checkpoint {directory} is damaged: {e}; {_previous_hint(mngr, step)}") from None
+    _check_structure(manifest, like_named, directory)
+    abstract = _nested({name: _abstract(x) for name, x in like_named.items()})
+    failure = None
+    try:
+        restored = mngr.restore(step, args=ocp.args.StandardRestore(abstract))
+    except Exception as e:  # orbax/tensorstore raise many types for missing or truncated files
+        failure = str(e).strip().splitlines()[0].split(". See full")[0][:160] if str(e).strip() else type(e).__name__
+    if failure is not None:
+        _collect_orphaned_reads()
+        raise CheckpointDamaged(f"checkpoint {directory} is damaged: its arrays cannot be read ({failure}); "
+                                f"{_previous_hint(mngr, step)}")
+    out = {name: (_lookup(restored, name) if x.size > 0 else _empty(x)) for name, x in like_named.items()}
+    host = {name: np.asarray(jax.device_get(x)) for name, x in out.items()}
+    if _digest(host) != manifest["sha256"]:
+        raise CheckpointDamaged(f"checkpoint {directory} is damaged: its arrays do not match their SHA-256 "
+                                f"checksum; {_previous_hint(mngr, step)}")
+    treedef = jax.tree.structure(like)
+    return jax.tree.unflatten(treedef, [out[name] for name in like_named])
+
+
+def _from_abandoned_read(report) -> bool:
+    """Whether an unraisable-exception report comes from orbax's abandoned reads: their coroutines, a frame of
+    orbax in the traceback, or tensorstore completing a read in flight after orbax closed its event loop
+    (`call_soon_threadsafe` -> 'Event loop is closed', reported from tensorstore's thread with no object)."""
+    code = getattr(report.object, "cr_code", None)
+    if code is not None and "orbax" in code.co_filename:
+        return True
+    frames = []
+    tb = report.exc_traceback
+    while tb is not None:
+        frames.append(tb.tb_frame.f_code)
+        tb = tb.tb_next
+    if any("orbax" in f.co_filename for f in frames):
+        return True
+    return (report.object is None and isinstance(report.exc_value, RuntimeError)
+            and str(report.exc_value) == "Event loop is closed"
+            and any(f.co_name == "call_soon_threadsafe" for f in frames))
+
+
+def _collect_orphaned_reads() -> None:
+    """When one array fails to read, orbax abandons the reads of the others as coroutines that are never
+    awaited, and tensorstore may still complete some; each would print an 'Exception ignored in: ...' block
+    (hundreds for a TrainState), now or whenever the garbage collector or tensorstore's thread gets to them.
+    From the first damaged checkpoint on, those reports (and only those) are dropped; the coroutines
+    collectable now are finalised at once."""
+    current = sys.unraisablehook
+    if not getattr(current, "drops_orbax_orphans", False):
+        def hook(report, _previous=current):
+            if not _from_abandoned_read(report):
+                _previous(report)
+
+        hook.drops_orbax_orphans = True
+        sys.unraisablehook = hook
+    gc.collect()
+
+
+def set_aside(mngr: ocp.CheckpointManager, step: int) -> Path:
+    """Move a damaged step out of the manager's directory (into `<dir>_damaged/`), keeping its files for
+    inspection, so that later saves of the same step number do not collide with it."""
+    src = step_dir(mngr, step)
+    dest_root = Path(str(mngr.directory).rstrip("/") + "_damaged")
+    dest_root.mkdir(parents=True, exist_ok=True)
+    dest = dest_root / f"{step}-{time.strftime('%Y%m%d-%H%M%S')}"
+    shutil.move(str(src), str(dest))
+    mngr.reload()
+    return dest
 
 
 def _empty(x):
@@ -48,3 +253,30 @@ def _empty(x):
 def _abstract(x):
     sharding = getattr(x, "sharding", None)
     return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding)
+
+
+def restore_newest_intact(pairs: list, report) -> tuple[int | None, list]:
+    """(step, restored states) at the newest step where every (manager, like) pair restores intact, for
+    `--resume`. Steps that are damaged or incomplete (one manager lacks them: a kill between two saves) are
+    reported through `report(line)` and set aside. (None, []) when there was no checkpoint at all;
+    CheckpointDamaged when there were some but none is intact. A checkpoint that does not fit (CheckpointError)
+    is not skipped: every older one would not fit either."""
+    steps = sorted(set().union(*(available_steps(m.directory) for m, _ in pairs)), reverse=True)
+    for step in steps:
+        try:
+            for m, _ in pairs:
+                if not step_dir(m, step).is_dir():
+                    raise CheckpointDamaged(f"checkpoint {step_dir(m, step)} is missing (a kill between two saves)")
+            states = [restore(m, step, like) for m, like in pairs]
+        except CheckpointDamaged as e:
+            moved = [set_aside(m, step) for m, _ in pairs if step_dir(m, step).is_dir()]
+            report(f"--resume: skipping step {step}: {str(e).split('; use the previous')[0]}"
+                   + (f" (moved to {moved[0].parent})" if moved else ""))
+            continue
+        if step != steps[0]:
+            report(f"--resume: resuming from step {step}, the newest intact checkpoint")
+        return step, states
+    if steps:
+        raise CheckpointDamaged(f"no intact checkpoint in {pairs[0][0].directory} (the damaged ones were moved "
+                                f"beside it); start the run again without --resume")
+    return None, []

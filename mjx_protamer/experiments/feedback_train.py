@@ -42,8 +42,8 @@ from mjx_protamer.config import ConfigError, check
 from mjx_protamer.human.batched import FeedbackRing, ring_add, ring_init
 from mjx_protamer.human.credit import CreditConfig, lag_weights
 from mjx_protamer.human.reward_model import RewardMLP, reward_fn, weighted_loss
-from mjx_protamer.human.teachers import (TeacherConfig, TeacherState, max_delay_steps, teacher_init, teacher_step,
-                                         with_channel)
+from mjx_protamer.human.teachers import (TeacherConfig, TeacherState, max_delay_steps, obs_norm_indices, teacher_init,
+                                         teacher_step, with_channel)
 
 KINDS = ("keyboard", "prosody", "speech")
 
@@ -112,6 +112,8 @@ class FeedbackTrainer(NamedTuple):
     lag_len: int
     max_events: int
     apply: Any  # r_hat(params, obs, action)
+    chunk_fn: Any  # `chunk` before jit, to vmap over seeds
+    signals: Any  # (obs, action, reward_terms) (..., dims) -> (..., C) the teacher rule's signals
 
 
 def _signal_columns(names, term_names, obs_size, act_size):
@@ -120,13 +122,7 @@ def _signal_columns(names, term_names, obs_size, act_size):
         if name in term_names:
             cols.append(("terms", term_names.index(name)))
         elif name.startswith("obs_norm:"):  # L2 norm over obs slices, e.g. obs_norm:64:68,70:74 (arm speed)
-            idx = []
-            for part in name[9:].split(","):
-                a, b = (int(x) for x in part.split(":"))
-                if not 0 <= a < b <= obs_size:
-                    raise ConfigError(f"config field 'feedback.teacher.rule': {name!r} slices outside obs [0, {obs_size})")
-                idx += list(range(a, b))
-            cols.append(("obs_norm", tuple(idx)))
+            cols.append(("obs_norm", obs_norm_indices(name, obs_size)))
         elif name.startswith("obs:") and 0 <= int(name[4:]) < obs_size:
             cols.append(("obs", int(name[4:])))
         elif name.startswith("action:") and 0 <= int(name[7:]) < act_size:
@@ -136,6 +132,13 @@ def _signal_columns(names, term_names, obs_size, act_size):
                               f"({', '.join(term_names)}), obs:i, obs_norm:a:b[,c:d] or action:i "
                               "(the in-jit teacher reads these)")
     return tuple(cols)
+
+
+def rule_signals(cols, obs, action, terms):
+    """The teacher rule's signal columns (`_signal_columns`) from per-step obs, action and reward terms."""
+    src = {"terms": terms, "obs": obs, "action": action}
+    return jnp.stack([jnp.linalg.norm(obs[..., jnp.asarray(i)], axis=-1) if s == "obs_norm" else src[s][..., i]
+                      for s, i in cols], axis=-1)
 
 
 def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | None = None) -> FeedbackTrainer:
@@ -158,9 +161,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     kind_cfgs = [with_channel(fc.teacher, k) for k in KINDS]
     extras = jnp.asarray([c.channel.get("duration_s") + c.channel.get("latency_s") for c in kind_cfgs])
     D = max(max_delay_steps(c, dt) for c in kind_cfgs)
-    L = max(len(lag_weights(CreditConfig(scheme=s, window_steps=fc.credit.window_steps, decay=fc.credit.decay,
-                                         delay_min_s=fc.credit.delay_min_s, delay_max_s=fc.credit.delay_max_s), dt))
-            for s in ("step_window", "time_window"))
+    L = max(len(lag_weights(dataclasses.replace(fc.credit, scheme=s), dt, c.channel))
+            for s in ("channel", "step_window", "time_window") for c in kind_cfgs)
     teach_envs = batched.teach_envs or B
     if teach_envs > B:
         raise ConfigError(f"config field 'batched.teach_envs': {teach_envs} > train.num_envs ({B})")
@@ -178,7 +180,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     def params_for(kind: str | None, credit: CreditConfig) -> FeedbackParams:
         w = np.zeros((L,), np.float32)
         if kind is not None:
-            lw = lag_weights(credit, dt)
+            lw = lag_weights(credit, dt, with_channel(fc.teacher, kind).channel)
             if len(lw) > L:
                 raise ConfigError(f"credit window of {len(lw)} steps exceeds the compiled {L}")
             w[:len(lw)] = lw
@@ -238,9 +240,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         data = ts.replay.data
         rows = (ptr0 + jnp.arange(T)[:, None] * B + jnp.arange(B)[None, :]) % cap  # (T, B)
         obs, action, terms = data.obs[rows], data.action[rows], data.reward_terms[rows]
-        src = {"terms": terms, "obs": obs, "action": action}
-        signals = jnp.stack([jnp.linalg.norm(obs[..., jnp.asarray(i)], axis=-1) if s == "obs_norm" else src[s][..., i]
-                             for s, i in cols], axis=-1)
+        signals = rule_signals(cols, obs, action, terms)
         rng, k_teach, k_lag, k_fresh = jax.random.split(fs.rng, 4)
         fs, value, valid, about, score = teach(fs, fp, signals, it0, k_teach)
 
@@ -308,7 +308,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         return ts, fs, metrics, events
 
     return FeedbackTrainer(trainer=trainer, init=init, chunk=jax.jit(chunk, donate_argnums=(0, 1)),
-                           params=params_for, lag_len=L, max_events=E, apply=apply)
+                           params=params_for, lag_len=L, max_events=E, apply=apply, chunk_fn=chunk,
+                           signals=lambda o, a, t: rule_signals(cols, o, a, t))
 
 
 def log_events(log, events: dict, kind: str, feedback, dt: float) -> int:
@@ -336,13 +337,11 @@ def log_events(log, events: dict, kind: str, feedback, dt: float) -> int:
 
 
 def default_feedback_config(kind: str):
-    """The feedback section of configs/feedback_<kind>.yaml: time-window credit for the voice channels
-    (at 200 Hz the 15-step window covers 75 ms), the authors' step window for keys."""
+    """The feedback section of configs/feedback_<kind>.yaml: credit over the channel's delay distribution."""
     from mjx_protamer.human.tamer_loop import FeedbackConfig
 
-    scheme = "step_window" if kind == "keyboard" else "time_window"
     base = FeedbackConfig()
-    return dataclasses.replace(base, credit=dataclasses.replace(base.credit, scheme=scheme),
+    return dataclasses.replace(base, credit=dataclasses.replace(base.credit, scheme="channel"),
                                teacher=with_channel(base.teacher, kind))
 
 

@@ -7,15 +7,17 @@ RNG), so `resume=True` continues from the last checkpoint exactly as if the run 
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
 import jax
 import yaml
 
-from mjx_protamer.config import ConfigError, to_dict
-from mjx_protamer.experiments import checkpoints, metrics, run_log
-from mjx_protamer.experiments.evaluate import CONFIG_NAME, eval_seed, evaluate
+from mjx_protamer.config import ConfigError, read_raw, to_dict
+from mjx_protamer.experiments import checkpoints, memory, metrics, run_log
+from mjx_protamer.experiments.evaluate import eval_seed, evaluate
+from mjx_protamer.experiments.run_loader import CONFIG_NAME
 
 
 def run_pretrain(
@@ -37,22 +39,22 @@ def run_pretrain(
     event goes to `feedback.jsonl` (append + fsync, `FeedbackLog`), the reward model to `reward_model.msgpack`
     and the feedback carry to `checkpoints_feedback/` (so `resume` is exact with feedback too).
     """
-    from mjx_protamer.agents.ddpg.train import make_train
+    from mjx_protamer.agents.ddpg.train import make_train, resolve_devices
     from mjx_protamer.experiments.env_factory import make_env
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     ckpt_dir = out / "checkpoints"
     config_path = out / CONFIG_NAME
     saved = to_dict(config)
-    mngr = checkpoints.manager(ckpt_dir)
-    latest = mngr.latest_step()
+    existing = checkpoints.available_steps(ckpt_dir)
     if resume:
-        if config_path.is_file() and yaml.safe_load(config_path.read_text()) != saved:
+        if not existing:
+            raise ConfigError(f"--resume: {out} holds no checkpoint to continue from; leave out --resume to "
+                              f"start a new run there, or give the --out of the run to continue")
+        if config_path.is_file() and read_raw(config_path) != saved:
             raise ConfigError(f"--resume: the config differs from the one saved in {config_path}")
-    elif latest is not None:
-        raise ConfigError(f"{out} already holds a run (checkpoint {latest}); pass --resume or another --out")
-    config_path.write_text(yaml.safe_dump(saved, sort_keys=False))
+    elif existing:
+        raise ConfigError(f"{out} already holds a run (checkpoint {existing[-1]}); pass --resume or another --out")
 
     tc = config.train
     env = make_env(config)
@@ -66,19 +68,27 @@ def run_pretrain(
         trainer = fb.trainer
         fb_params = fb.params(feedback.kind, feedback.config.credit)
         fb_state = fb.init(tc.seed)
+    # Refuse a state that cannot fit before allocating it (or writing anything into `out`).
+    like = jax.eval_shape(trainer.init, jax.random.PRNGKey(tc.seed))
+    memory.check_fits(like, resolve_devices(tc.num_devices), like.replay, config.ddpg.replay_size,
+                      other=None if fb_state is None else fb_state)
+    out.mkdir(parents=True, exist_ok=True)
+    mngr = checkpoints.manager(ckpt_dir)
+    _atomic_write(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
+    if fb is not None:
         fb_mngr = checkpoints.manager(out / "checkpoints_feedback")
-        (out / "feedback_config.yaml").write_text(yaml.safe_dump(
+        _atomic_write(out / "feedback_config.yaml", yaml.safe_dump(
             {"kind": feedback.kind, "feedback": to_dict(feedback.config), "batched": to_dict(feedback.batched)},
-            sort_keys=False))
+            sort_keys=False).encode())
     state = trainer.init(jax.random.PRNGKey(tc.seed))
     start = 0
-    if resume and latest is not None:
-        state = checkpoints.restore(mngr, latest, state)
-        start = latest
+    if resume:
+        pairs = [(mngr, state)] + ([(fb_mngr, fb_state)] if fb is not None else [])
+        step, restored = checkpoints.restore_newest_intact(pairs, lambda line: print(line, file=sys.stderr))
+        start = step
+        state = restored[0]
         if fb is not None:
-            if fb_mngr.latest_step() != latest:
-                raise ConfigError(f"--resume: no feedback checkpoint for chunk {latest} in {out}/checkpoints_feedback")
-            fb_state = checkpoints.restore(fb_mngr, latest, fb_state)
+            fb_state = restored[1]
     if fb is not None:
         from mjx_protamer.human.queue import FeedbackLog
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 import math
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,19 +27,36 @@ def flatten(metrics: dict, term_names: tuple[str, ...]) -> dict[str, float]:
     return row
 
 
+def read_rows(path: str | Path) -> tuple[list[dict[str, float]], int]:
+    """(rows, skipped) of a metrics CSV: rows that parse completely, and the count of those that do not (a
+    row torn by a kill in the middle of a write, or damage)."""
+    rows, skipped = [], 0
+    with Path(path).open(newline="") as f:
+        for r in csv.DictReader(f):
+            try:
+                if None in r or any(v is None for v in r.values()):
+                    raise ValueError("short or long row")
+                rows.append({k: float(v) for k, v in r.items()})
+            except ValueError:
+                skipped += 1
+    return rows, skipped
+
+
 class RunLog:
     """Appends one row per chunk. On resume, rows past the restored chunk (written after the last
-    checkpoint of a killed run) are dropped so the log matches an uninterrupted run."""
+    checkpoint of a killed run) and a row torn by the kill are dropped (and counted on stderr), so the
+    log matches an uninterrupted run."""
 
     def __init__(self, out_dir: str | Path, resume_chunk: int = 0, tensorboard: bool = True):
         self.out_dir = Path(out_dir)
         self.csv_path = self.out_dir / CSV_NAME
         self.rows: list[dict] = []
         if resume_chunk > 0 and self.csv_path.exists():
-            with self.csv_path.open() as f:
-                self.rows = [
-                    {k: float(v) for k, v in r.items()} for r in csv.DictReader(f) if float(r["chunk"]) <= resume_chunk
-                ]
+            rows, skipped = read_rows(self.csv_path)
+            if skipped:
+                print(f"note: {self.csv_path}: skipped {skipped} unreadable row(s) (a write torn by the kill)",
+                      file=sys.stderr)
+            self.rows = [r for r in rows if r["chunk"] <= resume_chunk]
         self._rewrite()
         self.writer = None
         if tensorboard:
@@ -47,13 +66,16 @@ class RunLog:
             self.writer = SummaryWriter(str(self.out_dir / "tb"), purge_step=purge)
 
     def _rewrite(self) -> None:
-        if not self.rows:
-            self.csv_path.write_text("")
-            return
-        with self.csv_path.open("w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(self.rows[0]))
-            w.writeheader()
-            w.writerows(self.rows)
+        """The CSV from `self.rows`, replaced atomically (a kill leaves the old file or the new one)."""
+        tmp = self.csv_path.with_name(self.csv_path.name + ".tmp")
+        with tmp.open("w", newline="") as f:
+            if self.rows:
+                w = csv.DictWriter(f, fieldnames=list(self.rows[0]))
+                w.writeheader()
+                w.writerows(self.rows)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, self.csv_path)
 
     def write(self, row: dict[str, float]) -> None:
         new_file = not self.rows

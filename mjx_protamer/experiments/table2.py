@@ -22,16 +22,20 @@ import dataclasses
 import json
 import platform
 import time
+import warnings
 from pathlib import Path
 from typing import Literal
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
+from mjx_protamer.agents.ddpg.config import PretrainConfig
 from mjx_protamer.config import ConfigError, check, to_dict
 from mjx_protamer.experiments import metrics as M
 from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, make_feedback_train
 from mjx_protamer.experiments.run_log import flatten
+from mjx_protamer.human.tamer_loop import FeedbackConfig
 
 # Paper Table II (means over 10 test episodes).
 PAPER = {
@@ -44,21 +48,11 @@ LABELS = {"first_touch_step": "First touch step ↓", "contact_rate": "Contact r
           "unique_regions": "Unique regions ↑", "freeze_ratio": "Freeze ratio ↓"}
 
 
-def _pretrain_default():
-    from mjx_protamer.agents.ddpg.config import PretrainConfig
-    return PretrainConfig()
-
-
-def _feedback_default():
-    from mjx_protamer.human.tamer_loop import FeedbackConfig
-    return FeedbackConfig()
-
-
 @dataclasses.dataclass(frozen=True)
 class Condition:
     name: str
     channel: Literal["none", "keyboard", "prosody", "speech"] = "none"
-    credit: Literal["step_window", "time_window"] = "time_window"
+    credit: Literal["channel", "step_window", "time_window"] = "channel"
     beta_scale: float = 1.0  # multiplies ddpg.reward_beta for this condition (a value: no recompile)
 
     def validate(self) -> None:
@@ -72,11 +66,11 @@ DEFAULT_CONDITIONS = (Condition("DDPG", "none"), Condition("DTK", "keyboard"), C
 
 @dataclasses.dataclass(frozen=True)
 class Table2Config:
-    pretrain: object = dataclasses.field(default_factory=_pretrain_default)  # PretrainConfig
-    feedback: object = dataclasses.field(default_factory=_feedback_default)  # FeedbackConfig (rule, model, dt)
+    pretrain: PretrainConfig = dataclasses.field(default_factory=PretrainConfig)
+    feedback: FeedbackConfig = dataclasses.field(default_factory=FeedbackConfig)  # rule, model, dt
     batched: BatchedFeedbackConfig = dataclasses.field(default_factory=BatchedFeedbackConfig)
     conditions: tuple[Condition, ...] = DEFAULT_CONDITIONS
-    seeds: tuple[int, ...] = (0,)
+    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)  # the issue-8 protocol: 5 seeds, vmapped
     moving_average: int = 10  # chunks in Figure 1's moving average
 
     def validate(self) -> None:
@@ -88,40 +82,14 @@ class Table2Config:
 
 
 def load_table2_config(path=None, overrides=None, seeds: int | None = None) -> Table2Config:
-    from mjx_protamer.agents.ddpg.config import PretrainConfig
     from mjx_protamer.config import from_dict, read_raw
-    from mjx_protamer.human.tamer_loop import FeedbackConfig
 
     raw = read_raw(path, overrides)
-    allowed = {"pretrain", "feedback", "batched", "conditions", "seeds", "moving_average"}
-    unknown = sorted(set(raw) - allowed)
-    if unknown:
-        raise ConfigError(f"unknown config key(s) {', '.join(unknown)}; allowed keys: {', '.join(sorted(allowed))}")
     if seeds is not None:
         if seeds < 1:
             raise ConfigError(f"--seeds must be >= 1, got {seeds}")
         raw["seeds"] = list(range(seeds))
-    top = {k: v for k, v in raw.items() if k in ("batched", "conditions", "seeds", "moving_average")}
-    from mjx_protamer.config import _build  # nested dataclasses with the usual validation
-
-    cfg = _build(_Top, top)
-    out = Table2Config(pretrain=from_dict(PretrainConfig, raw.get("pretrain")),
-                       feedback=from_dict(FeedbackConfig, raw.get("feedback")),
-                       batched=cfg.batched, conditions=cfg.conditions, seeds=cfg.seeds,
-                       moving_average=cfg.moving_average)
-    out.validate()
-    return out
-
-
-@dataclasses.dataclass(frozen=True)
-class _Top:
-    batched: BatchedFeedbackConfig = dataclasses.field(default_factory=BatchedFeedbackConfig)
-    conditions: tuple[Condition, ...] = DEFAULT_CONDITIONS
-    seeds: tuple[int, ...] = (0,)
-    moving_average: int = 10
-
-    def validate(self) -> None:
-        Table2Config.validate(self)  # type: ignore[arg-type]
+    return from_dict(Table2Config, raw)
 
 
 def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
@@ -141,33 +109,45 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
     training: list[dict] = []
     evals: dict[str, dict[int, dict]] = {c.name: {} for c in cfg.conditions}
     wall: dict[str, list[float]] = {c.name: [] for c in cfg.conditions}
-    for seed in cfg.seeds:
-        seeded = dataclasses.replace(pre, train=dataclasses.replace(tc, seed=seed))
-        for cond in cfg.conditions:
-            kind = None if cond.channel == "none" else cond.channel
-            credit = dataclasses.replace(cfg.feedback.credit, scheme=cond.credit)
-            t0 = time.perf_counter()
-            ts = ft.trainer.init(jax.random.PRNGKey(seed))
-            fs = ft.init(seed)
-            fp = ft.params(kind, credit)
-            fp = fp._replace(gain=fp.gain * cond.beta_scale)
-            for chunk in range(1, tc.num_chunks + 1):
-                ts, fs, m, _ = ft.chunk(ts, fs, fp)
-                row = flatten(jax.device_get(m), env.reward_term_names)
-                training.append({"condition": cond.name, "seed": seed, "chunk": chunk, **row})
-                if progress and (chunk % max(1, tc.num_chunks // 5) == 0 or chunk == tc.num_chunks):
-                    print(f"[{cond.name} seed {seed}] chunk {chunk}/{tc.num_chunks} return "
-                          f"{row['episode_return']:.1f} contact {row['contact_rate']:.2f} feedback "
-                          f"{row['feedback_total']:.0f} r_hat corr {row['r_hat_score_corr']:+.2f} "
-                          f"({time.perf_counter() - t0:.0f} s)", flush=True)
-            ev = evaluate(seeded, env, ts.actor_params, tc.eval_episodes, eval_seed(seeded))
-            ev["feedback"] = {k: training[-1][k] for k in ("feedback_total", "feedback_pos_total",
-                                                           "feedback_neg_total", "credited_rows_total",
-                                                           "rm_updates_total", "r_hat_score_corr")}
-            ev["train_wall_s"] = time.perf_counter() - t0
-            wall[cond.name].append(ev["train_wall_s"])
+    # Seeds run side by side in one program: init, every chunk and the test episodes are vmapped over them.
+    seeds = np.asarray(cfg.seeds, np.int32)
+    keys = jax.vmap(jax.random.PRNGKey)(seeds)
+    init = jax.jit(jax.vmap(ft.trainer.init))
+    init_feedback = jax.jit(jax.vmap(ft.init))
+    chunk_fn = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)), donate_argnums=(0, 1))
+    untrained = init_feedback(seeds).rm_params
+    for cond in cfg.conditions:
+        kind = None if cond.channel == "none" else cond.channel
+        credit = dataclasses.replace(cfg.feedback.credit, scheme=cond.credit)
+        t0 = time.perf_counter()
+        ts, fs = init(keys), init_feedback(seeds)
+        fp = ft.params(kind, credit)
+        fp = fp._replace(gain=fp.gain * cond.beta_scale)
+        for chunk in range(1, tc.num_chunks + 1):
+            ts, fs, m, _ = chunk_fn(ts, fs, fp)
+            m = jax.device_get(m)
+            rows = [{"condition": cond.name, "seed": int(seed), "chunk": chunk,
+                     **flatten(jax.tree.map(lambda x, i=i: x[i], m), env.reward_term_names)}
+                    for i, seed in enumerate(cfg.seeds)]
+            training += rows
+            if progress and (chunk % max(1, tc.num_chunks // 5) == 0 or chunk == tc.num_chunks):
+                print(f"[{cond.name}, {len(seeds)} seeds] chunk {chunk}/{tc.num_chunks} return "
+                      f"{np.nanmean([r['episode_return'] for r in rows]):.1f} contact "
+                      f"{np.mean([r['contact_rate'] for r in rows]):.2f} feedback "
+                      f"{np.mean([r['feedback_total'] for r in rows]):.0f} r_hat corr "
+                      f"{np.mean([r['r_hat_score_corr'] for r in rows]):+.2f} "
+                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
+        train_s = time.perf_counter() - t0
+        results = evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params, untrained)
+        for i, seed in enumerate(cfg.seeds):
+            ev = results[i]
+            last = [r for r in training if r["condition"] == cond.name and r["seed"] == seed][-1]
+            ev["feedback"] = {k: last[k] for k in ("feedback_total", "feedback_pos_total", "feedback_neg_total",
+                                                   "credited_rows_total", "rm_updates_total", "r_hat_score_corr")}
+            ev["train_wall_s"] = train_s
             evals[cond.name][seed] = ev
             (out / f"eval_{cond.name}_seed{seed}.json").write_text(json.dumps(ev, indent=2))
+        wall[cond.name].append(train_s)
     total_s = time.perf_counter() - t_all
     _write_training_csv(training, out / "training.csv")
     summary = _summarize(cfg, evals, wall, total_s)
@@ -180,6 +160,67 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
     return {"out_dir": str(out), "table_md": str(out / "table2.md"), "table_json": str(out / "table2.json"),
             "figure1": str(fig1), "figure2": str(fig2), "training_csv": str(out / "training.csv"),
             "wall_s": total_s, "summary": summary}
+
+
+def _corr(x: np.ndarray, y: np.ndarray) -> float | None:
+    """Pearson correlation; None where either side is constant (no variation to track)."""
+    x, y = x - x.mean(), y - y.mean()
+    den = float(np.sqrt(np.sum(x * x) * np.sum(y * y)))
+    return float(np.sum(x * y) / den) if den > 1e-12 else None
+
+
+def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untrained_params) -> list[dict]:
+    """Test episodes of every seed's deterministic actor (vmapped over seeds): the four metrics, the
+    teacher's mean hidden score on them (`teacher_score`), and how r_hat tracks that score on these
+    held-out states, beside an untrained reward model of the same seed (`r_hat_corr_test`,
+    `r_hat_corr_untrained`)."""
+    from mjx_protamer.agents.ddpg.evaluate import make_rollout
+    from mjx_protamer.experiments.evaluate import eval_seed
+    from mjx_protamer.human.teachers import rule_scores
+
+    pre = cfg.pretrain
+    rollout = make_rollout(env, pre.train.episode_length, pre.ddpg.actor_hidden)
+    episodes = pre.train.eval_episodes
+    keys = jnp.stack([jax.random.split(jax.random.PRNGKey(eval_seed(dataclasses.replace(
+        pre, train=dataclasses.replace(pre.train, seed=int(s))))), episodes) for s in cfg.seeds])
+    teacher = cfg.feedback.teacher
+
+    @jax.jit
+    def run(actor_params, rm_params, untrained_params, keys):
+        sig = rollout(actor_params, keys)
+        score = jax.vmap(lambda o, a, t: rule_scores(teacher, ft.signals(o, a, t)))(
+            sig["obs"], sig["action"], sig["reward_terms"])
+        r_hat = ft.apply(rm_params, sig["obs"], sig["action"])
+        r_hat0 = ft.apply(untrained_params, sig["obs"], sig["action"])
+        keep = ("reward", "self_contact", "region_mask", "arm_speed")
+        return {k: sig[k] for k in keep}, score, r_hat, r_hat0
+
+    sig, score, r_hat, r_hat0 = jax.device_get(jax.vmap(run)(actor_params, rm_params, untrained_params, keys))
+    out = []
+    for i in range(len(cfg.seeds)):
+        ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i])
+        returns = np.sum(sig["reward"][i], axis=1)
+        ev["episode_return"] = float(returns.mean())
+        ev["per_episode"]["episode_return"] = [float(r) for r in returns]
+        ev["teacher_score"] = float(score[i].mean())
+        ev["per_episode"]["teacher_score"] = [float(x) for x in score[i].mean(axis=1)]
+        ev["r_hat_corr_test"] = _corr(np.ravel(r_hat[i]), np.ravel(score[i]))
+        ev["r_hat_corr_untrained"] = _corr(np.ravel(r_hat0[i]), np.ravel(score[i]))
+        out.append(ev)
+    return out
+
+
+def seed_stats(values) -> dict:
+    """Mean over seeds, the per-seed values and the 95% confidence half-width of the mean (Student t)."""
+    from scipy import stats
+
+    v = np.asarray([np.nan if x is None else x for x in values], float)
+    v = v[np.isfinite(v)]
+    n = len(v)
+    mean = float(v.mean()) if n else None
+    ci = float(stats.t.ppf(0.975, n - 1) * v.std(ddof=1) / np.sqrt(n)) if n > 1 else None
+    return {"mean": mean, "ci95": ci, "seed_values": [None if x is None else float(x) for x in values],
+            "seed_std": float(v.std(ddof=1)) if n > 1 else None}
 
 
 def _write_training_csv(rows: list[dict], path: Path) -> None:
@@ -199,14 +240,14 @@ def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> di
         entry: dict = {"channel": c.channel, "credit": c.credit if c.channel != "none" else None,
                        "beta": cfg.pretrain.ddpg.reward_beta * c.beta_scale if c.channel != "none" else 0.0,
                        "paper": PAPER.get(c.name)}
-        for name in M.METRIC_NAMES:
-            episodes = [v for s in cfg.seeds for v in per_seed[s]["per_episode"][name]]
-            seed_means = [per_seed[s][name] for s in cfg.seeds]
-            entry[name] = {"mean": float(np.mean(episodes)), "seed_means": seed_means,
-                           "seed_std": float(np.std(seed_means)), "per_episode": episodes}
+        for name in M.METRIC_NAMES + ("teacher_score",):
+            entry[name] = seed_stats([per_seed[s][name] for s in cfg.seeds])
+            entry[name]["seed_means"] = entry[name]["seed_values"]
+            entry[name]["per_episode"] = [v for s in cfg.seeds for v in per_seed[s]["per_episode"][name]]
+        for name in ("r_hat_corr_test", "r_hat_corr_untrained", "episode_return"):
+            entry[name] = seed_stats([per_seed[s][name] for s in cfg.seeds])
         entry["feedback"] = {k: float(np.mean([per_seed[s]["feedback"][k] for s in cfg.seeds]))
                              for k in per_seed[cfg.seeds[0]]["feedback"]}
-        entry["episode_return"] = float(np.mean([per_seed[s]["episode_return"] for s in cfg.seeds]))
         entry["train_wall_s"] = float(np.sum(wall[c.name]))
         conds[c.name] = entry
     tc = cfg.pretrain.train
@@ -214,6 +255,7 @@ def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> di
         "conditions": conds,
         "seeds": list(cfg.seeds),
         "env": cfg.pretrain.env_name,
+        "reward": reward_preset_name(cfg.pretrain),
         "num_envs": tc.num_envs,
         "env_steps_per_run": tc.iterations * tc.num_envs,
         "eval_episodes_per_seed": tc.eval_episodes,
@@ -223,33 +265,56 @@ def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> di
     }
 
 
+def _fmt(stat: dict, digits: int = 3) -> str:
+    if stat["mean"] is None:
+        return "n/a"
+    ci = f" ± {stat['ci95']:.{digits}f}" if stat.get("ci95") is not None else ""
+    return f"{stat['mean']:.{digits}f}{ci}"
+
+
+def reward_preset_name(pre) -> str:
+    """'infant', 'paper' or 'custom' for a self-touch run's reward; the env name for another env."""
+    if pre.env_name != "self_touch":
+        return pre.env_name
+    reward = pre.env.reward
+    for name in type(reward).PRESETS:
+        if reward == type(reward).preset(name):
+            return name
+    return "custom"
+
+
 def format_markdown(summary: dict) -> str:
     conds = summary["conditions"]
     names = list(conds)
-    multi = len(summary["seeds"]) > 1
-    head = "| Metric | " + " | ".join(f"{n} ours | {n} paper" for n in names) + " |"
+    n = len(summary["seeds"])
+    head = "| Metric | " + " | ".join(f"{c} ours | {c} paper" for c in names) + " |"
     sep = "|---|" + "---|---|" * len(names)
-    lines = [f"Table II analogue: means over {summary['eval_episodes_per_seed']} test episodes x "
-             f"{len(summary['seeds'])} seed(s) {summary['seeds']} (deterministic actor); {summary['env']} env, "
-             f"{summary['num_envs']} envs x {summary['env_steps_per_run']} env steps per run; "
-             f"wall time {summary['wall_s']:.0f} s.", "", head, sep]
+    lines = [f"Table II analogue: mean over {n} seed(s) {summary['seeds']} of each seed's mean over "
+             f"{summary['eval_episodes_per_seed']} test episodes (deterministic actor), ± the 95% confidence "
+             f"half-width (Student t over seeds); {summary['env']} env, reward preset {summary.get('reward')}, "
+             f"{summary['num_envs']} envs x {summary['env_steps_per_run']} env steps per run; wall time "
+             f"{summary['wall_s']:.0f} s.", "", head, sep]
     for metric in M.METRIC_NAMES:
         cells = []
-        for n in names:
-            e = conds[n][metric]
-            ours = f"{e['mean']:.3f}" + (f" ± {e['seed_std']:.3f}" if multi else "")
-            paper = conds[n]["paper"]
-            cells.append(f"{ours} | {paper[metric]:.3f}" if paper else f"{ours} | -")
+        for c in names:
+            paper = conds[c]["paper"]
+            cells.append(f"{_fmt(conds[c][metric])} | " + (f"{paper[metric]:.3f}" if paper else "-"))
         lines.append(f"| {LABELS[metric]} | " + " | ".join(cells) + " |")
-    lines += ["", "| Feedback | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
-    for key, label in (("feedback_total", "events given"), ("credited_rows_total", "credited rows"),
-                       ("rm_updates_total", "r_hat updates"), ("r_hat_score_corr", "corr(r_hat, hidden score)")):
-        lines.append(f"| {label} | " + " | ".join(f"{conds[n]['feedback'][key]:.2f}" if key == "r_hat_score_corr"
-                                                   else f"{conds[n]['feedback'][key]:.0f}" for n in names) + " |")
-    lines.append(f"| test return (intrinsic) | " + " | ".join(f"{conds[n]['episode_return']:.1f}" for n in names)
-                 + " |")
-    if multi:
-        lines += ["", "± : std over seeds of the per-seed means."]
+    lines += ["", "| Teacher and reward model | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for key, label in (("teacher_score", "teacher_score (hidden rule, test episodes) ↑"),
+                       ("r_hat_corr_test", "r_hat_corr_test (held-out test states)"),
+                       ("r_hat_corr_untrained", "r_hat_corr_untrained (same states)"),
+                       ("episode_return", "test return (intrinsic)")):
+        lines.append(f"| {label} | " + " | ".join(_fmt(conds[c][key], 1 if key == "episode_return" else 3)
+                                                  for c in names) + " |")
+    for key, label in (("feedback_total", "events given (per seed)"), ("credited_rows_total", "credited rows"),
+                       ("rm_updates_total", "r_hat updates")):
+        lines.append(f"| {label} | " + " | ".join(f"{conds[c]['feedback'][key]:.0f}" for c in names) + " |")
+    lines += ["", "Per-seed means (seeds in order):", ""]
+    for metric in M.METRIC_NAMES + ("teacher_score", "r_hat_corr_test"):
+        vals = "; ".join(f"{c} " + ", ".join("n/a" if v is None else f"{v:.3g}" for v in conds[c][metric]["seed_values"])
+                         for c in names)
+        lines.append(f"- {metric}: {vals}")
     return "\n".join(lines) + "\n"
 
 
@@ -281,18 +346,18 @@ def plot_training(rows: list[dict], cfg: Table2Config, path: Path) -> Path:
                 curves.append(_moving(np.array([x.get(key, np.nan) for x in r], float), cfg.moving_average))
                 steps = np.array([x["env_steps"] for x in r])
             curves = np.array(curves)
-            with np.errstate(all="ignore"):
+            with warnings.catch_warnings():  # chunks where no seed finished an episode stay NaN
+                warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(curves, axis=0)
-            line, = ax.plot(steps, mean, label=c.name)
-            if len(cfg.seeds) > 1:
-                ax.fill_between(steps, np.nanmin(curves, axis=0), np.nanmax(curves, axis=0), alpha=0.15,
-                                color=line.get_color())
+            line, = ax.plot(steps, mean, label=c.name, lw=2)
+            for curve in curves if len(cfg.seeds) > 1 else ():  # every seed, thin: bimodal runs stay visible
+                ax.plot(steps, curve, color=line.get_color(), lw=0.6, alpha=0.5)
         ax.set_xlabel("env steps (all envs)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         ax.legend()
     fig.suptitle(f"Figure 1 analogue: moving average ({cfg.moving_average} chunks) over "
-                 f"{len(cfg.seeds)} seed(s); shaded: min-max over seeds")
+                 f"{len(cfg.seeds)} seed(s); thick: mean, thin: each seed")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -311,6 +376,10 @@ def plot_regions(summary: dict, path: Path) -> Path:
     ax.boxplot(data, showmeans=True)
     ax.set_xticks(range(1, len(names) + 1), names)
     for i, n in enumerate(names, start=1):
+        seed_means = summary["conditions"][n]["unique_regions"]["seed_values"]
+        jitter = np.linspace(-0.12, 0.12, len(seed_means)) if len(seed_means) > 1 else np.zeros(1)
+        ax.scatter(i + jitter, seed_means, marker="o", facecolors="none", edgecolors="black", zorder=3,
+                   label="seed means" if i == 1 else None)
         paper = summary["conditions"][n]["paper"]
         if paper:
             ax.plot(i, paper["unique_regions"], marker="x", color="red", ms=9,

@@ -21,8 +21,18 @@ SOURCES: tuple[str, ...] = ("keyboard", "prosody", "whisper", "simulated")
 MAX_FUTURE_S = 0.5
 
 
+# Why an event was refused, in a word: rejected events are summarised by these when too many come to log
+# each one (`FeedbackQueue.drain`).
+REJECT_KINDS: tuple[str, ...] = ("malformed", "source", "not_finite", "out_of_range", "time_order", "future",
+                                 "details")
+
+
 class InvalidFeedback(ValueError):
-    """An event that must not be used; the message says why."""
+    """An event that must not be used; the message says why, `kind` (one of REJECT_KINDS) says it in a word."""
+
+    def __init__(self, message: str, kind: str = "malformed"):
+        super().__init__(message)
+        self.kind = kind if kind in REJECT_KINDS else "malformed"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,21 +70,21 @@ def validate_event(event: FeedbackEvent, now: float | None = None) -> FeedbackEv
     """Return the event if it may be used, else raise InvalidFeedback with the reason."""
     now = time.time() if now is None else now
     if event.source not in SOURCES:
-        raise InvalidFeedback(f"unknown source {event.source!r}; allowed: {', '.join(SOURCES)}")
+        raise InvalidFeedback(f"unknown source {event.source!r}; allowed: {', '.join(SOURCES)}", "source")
     for name in ("value", "t_start", "t_end"):
         v = getattr(event, name)
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
-            raise InvalidFeedback(f"{name} must be a finite number, got {v!r}")
+            raise InvalidFeedback(f"{name} must be a finite number, got {v!r}", "not_finite")
     if not -1.0 <= event.value <= 1.0:
-        raise InvalidFeedback(f"value {event.value} is outside [-1, 1]")
+        raise InvalidFeedback(f"value {event.value} is outside [-1, 1]", "out_of_range")
     if event.t_end < event.t_start:
-        raise InvalidFeedback(f"t_end {event.t_end} is before t_start {event.t_start}")
+        raise InvalidFeedback(f"t_end {event.t_end} is before t_start {event.t_start}", "time_order")
     if event.t_end > now + MAX_FUTURE_S:
         raise InvalidFeedback(
-            f"timestamp {event.t_end:.3f} is {event.t_end - now:.3f} s in the future (clock {now:.3f})"
+            f"timestamp {event.t_end:.3f} is {event.t_end - now:.3f} s in the future (clock {now:.3f})", "future"
         )
     try:
         json.dumps(event.details, allow_nan=False)
     except (TypeError, ValueError) as e:
-        raise InvalidFeedback(f"details are not JSON-serialisable: {e}") from None
+        raise InvalidFeedback(f"details are not JSON-serialisable: {e}", "details") from None
     return event

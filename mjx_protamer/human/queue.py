@@ -2,10 +2,12 @@
 
 Producers call `put(event)` from any process: the event is validated, and a full queue counts an
 overflow instead of blocking or dropping silently. The learner calls `drain(log)` between jitted chunks;
-every accepted event goes to an append-only JSONL log (flushed and fsynced per line, so a crash
-loses at most the line being written). Events rejected by a producer travel to the learner on a small
-side queue with their reason and are logged by `drain` too; overflows since the last drain are logged as
-one "overflow" record. Nothing is dropped without a count and a log line.
+every accepted event goes to an append-only JSONL log (`mjx_protamer.jsonl`: flushed and fsynced per line,
+a torn last line ended before appending, so a crash loses at most the line being written). Events rejected
+by a producer travel to the learner on a side queue with their reason and are logged by `drain` one by one;
+when a burst fills that queue, the rest are counted by kind (`REJECT_KINDS`) in shared memory and `drain`
+logs one "rejected_summary" record with those counts. Overflows since the last drain are logged as one
+"overflow" record. Nothing is dropped without a count and a log line.
 
 Pure Python (no JAX): the audio front end imports this module.
 """
@@ -14,41 +16,42 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
-import os
 import queue as queue_lib
 import time
 from pathlib import Path
 from typing import Callable
 
-from mjx_protamer.human.events import FeedbackEvent, InvalidFeedback, validate_event
+from mjx_protamer import jsonl
+from mjx_protamer.human.events import REJECT_KINDS, FeedbackEvent, InvalidFeedback, validate_event
 
 
 class FeedbackLog:
     """Append-only JSONL log of accepted and rejected feedback; each line is durable once written.
 
     Record kinds (`status`): "accepted" (the event's fields + `step`, the env step it was drained at),
-    "rejected" (`reason`, `raw`), "overflow" (`count` new since the last record, `total`), and free-form
-    "note" records (run start/end).
+    "rejected" (`reason`, `kind`, `raw`), "rejected_summary" (`counts` by kind of the rejected events that
+    were not logged one by one, `total`), "overflow" (`count` new since the last record, `total`), and
+    free-form "note" records (run start/end).
     """
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "a", encoding="utf-8")
+        self._fh = jsonl.open_append(self.path)
 
     def _write(self, record: dict) -> None:
-        self._fh.write(json.dumps(record, sort_keys=True) + "\n")
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+        jsonl.append(self._fh, record)
 
     def accepted(self, event: FeedbackEvent, step: int | None = None) -> None:
         record = json.loads(event.to_json())
         record.update(status="accepted", received=time.time(), step=step)
         self._write(record)
 
-    def rejected(self, raw: object, reason: str) -> None:
+    def rejected(self, raw: object, reason: str, kind: str = "malformed") -> None:
         raw_text = raw if isinstance(raw, str) else repr(raw)
-        self._write({"status": "rejected", "reason": reason, "received": time.time(), "raw": raw_text})
+        self._write({"status": "rejected", "reason": reason, "kind": kind, "received": time.time(), "raw": raw_text})
+
+    def rejected_summary(self, counts: dict[str, int], total: int) -> None:
+        self._write({"status": "rejected_summary", "counts": counts, "total": int(total), "received": time.time()})
 
     def overflow(self, count: int, total: int) -> None:
         self._write({"status": "overflow", "count": int(count), "total": int(total), "received": time.time()})
@@ -68,18 +71,12 @@ class FeedbackLog:
 
     @staticmethod
     def records(path: str | Path) -> list[dict]:
-        """Every complete record of a log; a torn last line (a crash mid-write) is skipped."""
-        out = []
-        for line in Path(path).read_text(encoding="utf-8").splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue
-        return out
+        """Every complete record of a log; unreadable lines (a torn write) are skipped and counted on stderr."""
+        return jsonl.read_reporting(path)
 
     @staticmethod
     def read(path: str | Path) -> list[FeedbackEvent]:
-        """The accepted events of a log; a torn last line (a crash mid-write) is skipped."""
+        """The accepted events of a log; unreadable lines (a torn write) are skipped and counted on stderr."""
         return [
             FeedbackEvent.from_json(json.dumps(r))
             for r in FeedbackLog.records(path)
@@ -96,7 +93,7 @@ class FeedbackQueue:
     """
 
     def __init__(self, maxsize: int = 256, ctx: mp.context.BaseContext | None = None,
-                 clock: Callable[[], float] | None = None, reject_maxsize: int = 64,
+                 clock: Callable[[], float] | None = None, reject_maxsize: int = 256,
                  flush_timeout: float = 1.0):
         if maxsize < 1:
             raise ValueError(f"maxsize must be >= 1, got {maxsize}")
@@ -113,6 +110,9 @@ class FeedbackQueue:
         self._rejects_sent = ctx.Value("i", 0)
         self._rejects_taken = ctx.Value("i", 0)
         self._overflow_logged = ctx.Value("i", 0)
+        # Rejected events that found the side queue full, by kind; and how many of those drain has logged.
+        self._unsent = ctx.Array("i", len(REJECT_KINDS))
+        self._unsent_logged = ctx.Array("i", len(REJECT_KINDS))
         self.last_reason: str | None = None  # producer-local: why the last put() returned False
 
     def _now(self) -> float:
@@ -123,21 +123,22 @@ class FeedbackQueue:
         with counter.get_lock():
             counter.value += by
 
-    def _reject(self, raw: object, reason: str) -> None:
+    def _reject(self, raw: object, reason: str, kind: str) -> None:
         self._bump(self._rejected)
         self.last_reason = reason
         try:
-            self._rejects.put_nowait((raw if isinstance(raw, str) else repr(raw), reason))
+            self._rejects.put_nowait((raw if isinstance(raw, str) else repr(raw), reason, kind))
             self._bump(self._rejects_sent)
-        except queue_lib.Full:
-            pass  # still counted in `rejected`; the learner logs the shortfall on drain
+        except queue_lib.Full:  # a burst: counted by kind, logged as a summary on the next drain
+            with self._unsent.get_lock():
+                self._unsent[REJECT_KINDS.index(kind)] += 1
 
     def offer(self, event: FeedbackEvent) -> tuple[bool, str | None]:
         """Validate and enqueue without blocking: (True, None), or (False, reason) - counted either way."""
         try:
             validate_event(event, now=self._now())
         except InvalidFeedback as e:
-            self._reject(event, str(e))
+            self._reject(event, str(e), e.kind)
             return False, str(e)
         try:
             self._q.put_nowait(event)
@@ -171,9 +172,11 @@ class FeedbackQueue:
               timeout: float = 0.0) -> list[FeedbackEvent]:
         """Take what is queued now (re-validated against the receiver's clock), logging each accepted
         and rejected event and any overflow since the last drain."""
-        for raw, reason in self._take(self._rejects, self._rejects_sent, self._rejects_taken, None, 0.0):
+        for raw, reason, kind in self._take(self._rejects, self._rejects_sent, self._rejects_taken, None, 0.0):
             if log is not None:
-                log.rejected(raw, reason)
+                log.rejected(raw, reason, kind)
+        if log is not None:
+            self._log_unsent(log)
         out: list[FeedbackEvent] = []
         for event in self._take(self._q, self._accepted, self._taken, max_items, timeout):
             try:
@@ -181,7 +184,7 @@ class FeedbackQueue:
             except InvalidFeedback as e:
                 self._bump(self._rejected)
                 if log is not None:
-                    log.rejected(event, str(e))
+                    log.rejected(event, str(e), e.kind)
                 continue
             if log is not None:
                 log.accepted(event, step=step)
@@ -192,6 +195,17 @@ class FeedbackQueue:
             log.overflow(new, total)
             self._overflow_logged.value = total
         return out
+
+    def _log_unsent(self, log: FeedbackLog) -> None:
+        """One "rejected_summary" record for the rejected events not logged one by one since the last drain."""
+        with self._unsent.get_lock():
+            now = list(self._unsent)
+        new = {k: now[i] - self._unsent_logged[i] for i, k in enumerate(REJECT_KINDS)
+               if now[i] > self._unsent_logged[i]}
+        if new:
+            log.rejected_summary(new, total=sum(now))
+            for i in range(len(REJECT_KINDS)):
+                self._unsent_logged[i] = now[i]
 
     @property
     def overflow(self) -> int:

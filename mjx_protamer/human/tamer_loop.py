@@ -20,12 +20,13 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_protamer.agents.ddpg.config import PretrainConfig
 from mjx_protamer.config import check
 from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory
@@ -52,16 +53,11 @@ class FeedbackConfig:
         check(self.queue_size >= 1, "queue_size", f"must be >= 1, got {self.queue_size}")
 
 
-def _pretrain_config_type():
-    from mjx_protamer.agents.ddpg.config import PretrainConfig
-    return PretrainConfig
-
-
 @dataclasses.dataclass(frozen=True)
 class FeedbackRunConfig:
     """configs/feedback_*.yaml: a pretrain config (env, ddpg, train) plus the feedback section."""
 
-    pretrain: Any = dataclasses.field(default_factory=lambda: _pretrain_config_type()())
+    pretrain: PretrainConfig = dataclasses.field(default_factory=PretrainConfig)
     feedback: FeedbackConfig = dataclasses.field(default_factory=FeedbackConfig)
 
     def validate(self) -> None:
@@ -71,17 +67,9 @@ class FeedbackRunConfig:
 
 def load_feedback_config(path=None, overrides=None) -> FeedbackRunConfig:
     """Load a FeedbackRunConfig; the `pretrain` section is a PretrainConfig (DDPG engineer's)."""
-    from mjx_protamer.config import ConfigError, from_dict, read_raw
+    from mjx_protamer.config import load_config
 
-    raw = read_raw(path, overrides)
-    unknown = sorted(set(raw) - {"pretrain", "feedback"})
-    if unknown:
-        raise ConfigError(f"unknown config key(s) {', '.join(unknown)}; allowed keys: feedback, pretrain")
-    pre = from_dict(_pretrain_config_type(), raw.get("pretrain"))
-    fb = from_dict(FeedbackConfig, raw.get("feedback"))
-    cfg = FeedbackRunConfig(pretrain=pre, feedback=fb)
-    cfg.validate()
-    return cfg
+    return load_config(FeedbackRunConfig, path, overrides)
 
 
 class TamerRun:
@@ -119,7 +107,7 @@ class TamerRun:
         history = max(4096, 2 * tc.chunk_steps + int(fc.credit.delay_max_s / fc.dt) + 64)
         self.step_clock = StepClock(fc.dt, capacity=history)
         self.history = StepHistory(history, env.observation_size, env.action_size)
-        self.assigner = CreditAssigner(fc.credit, self.step_clock)
+        self.assigner = CreditAssigner(fc.credit, self.step_clock, fc.teacher.channel)
         self.teacher = None
         if self.simulated:
             kind = feedback.split(":", 1)[1] if ":" in feedback else fc.teacher.channel.kind

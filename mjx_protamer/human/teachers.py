@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_protamer.config import check
+from mjx_protamer.human.channels import ChannelConfig  # noqa: F401  (re-exported: configs name it here)
 from mjx_protamer.human.events import FeedbackEvent
 
 
@@ -63,53 +64,30 @@ class Clause:
         check(-1.0 <= self.value <= 1.0, "value", f"must be in [-1, 1], got {self.value}")
 
 
+# The default hidden rule (self-touch, 84-dim observation with k = 10): "touch yourself with both hands, and
+# don't freeze". Each clause reads what the learner sees in (s, a) (the left and right touch blocks obs 0:26
+# and 26:52, the arm joint speeds obs 64:68 and 70:74) and holds for longer than a reaction delay's spread
+# (0.1-0.3 s), so a reward model can learn it from delayed feedback; and it asks for something the intrinsic
+# reward does not (its contact term saturates with one hand). With threshold 0.75 the teacher approves only
+# two-handed touch (score 1) and disapproves only a freeze without two-handed touch (score -1 or -0.5: -1).
 SELF_TOUCH_RULE = (
+    Clause("obs_norm:0:26", 0.5, above=0.05, sustain=20),  # left hand or fingers touching, held 0.1 s
+    Clause("obs_norm:26:52", 0.5, above=0.05, sustain=20),  # right hand or fingers touching, held 0.1 s
+    Clause("obs_norm:64:68,70:74", -1.0, below=0.5, sustain=60),  # arms frozen (< 0.5 rad/s) for 0.3 s
+)
+# The rule of the first version, on reward terms (kept for comparison, `rule: legacy` is not a preset: copy it):
+# the region onset it approves lasts one step and the joint-limit clause was true on 100% of training steps.
+LEGACY_RULE = (
     Clause("region", 1.0, above=0.0),
     Clause("contact", 0.6, above=0.05, sustain=20),
     Clause("movement", -1.0, below=-0.25, sustain=40),
     Clause("joint_limit", -0.7, below=-0.05),
 )
 
-_PRESETS = {
-    # reaction delay mean/std/min (s), utterance duration (s), processing latency (s)
-    "keyboard": dict(delay_mean_s=0.35, delay_std_s=0.1, delay_min_s=0.15, duration_s=0.0, latency_s=0.0),
-    "prosody": dict(delay_mean_s=0.6, delay_std_s=0.2, delay_min_s=0.25, duration_s=0.8, latency_s=0.3),
-    "speech": dict(delay_mean_s=0.8, delay_std_s=0.25, delay_min_s=0.3, duration_s=1.0, latency_s=1.2),
-}
-
-
-@dataclasses.dataclass(frozen=True)
-class ChannelConfig:
-    kind: Literal["keyboard", "prosody", "speech"] = "keyboard"
-    delay_mean_s: float | None = None  # None: the kind's preset
-    delay_std_s: float | None = None
-    delay_min_s: float | None = None
-    duration_s: float | None = None  # key press 0; an utterance's length (t_end - t_start)
-    latency_s: float | None = None  # processing after t_end before the event reaches the queue
-    gain: float = 2.0  # prosody: value = tanh(gain * score + noise)
-    noise_std: float = 0.5  # prosody
-    # speech: P(recognised | intended), rows intended (+1, 0, -1), columns recognised (+1, 0, -1)
-    confusion: tuple[float, ...] = (0.85, 0.10, 0.05, 0.10, 0.80, 0.10, 0.05, 0.10, 0.85)
-
-    def validate(self) -> None:
-        check(len(self.confusion) == 9, "confusion", f"needs 9 entries (3x3), got {len(self.confusion)}")
-        for r in range(3):
-            row = self.confusion[3 * r:3 * r + 3]
-            check(min(row) >= 0 and abs(sum(row) - 1.0) < 1e-6, "confusion", f"row {r} must be a distribution, got {row}")
-        check(self.noise_std >= 0, "noise_std", f"must be >= 0, got {self.noise_std}")
-        for name in ("delay_mean_s", "delay_std_s", "delay_min_s", "duration_s", "latency_s"):
-            v = getattr(self, name)
-            check(v is None or v >= 0, name, f"must be >= 0, got {v}")
-
-    def get(self, name: str) -> float:
-        v = getattr(self, name)
-        return float(_PRESETS[self.kind][name] if v is None else v)
-
-
 @dataclasses.dataclass(frozen=True)
 class TeacherConfig:
     rule: tuple[Clause, ...] = SELF_TOUCH_RULE
-    threshold: float = 0.5  # |score| needed to consider giving feedback
+    threshold: float = 0.75  # |score| needed to consider giving feedback
     give_rate: float = 0.5
     min_gap_steps: int = 40
     flip_prob: float = 0.05
@@ -189,6 +167,22 @@ def teacher_step(config: TeacherConfig, dt: float, state: TeacherState, signals:
     return TeacherState(runs, since, silent), Decision(give, value.astype(jnp.float32), score, delay)
 
 
+def rule_scores(config: TeacherConfig, signals: jax.Array) -> jax.Array:
+    """The hidden score of every step of one episode, signals (T, C) -> (T,): what the teacher would judge,
+    whether or not it gives feedback (the `teacher_score` metric of test episodes)."""
+    rule = config.rule
+    above = jnp.asarray([-jnp.inf if c.above is None else c.above for c in rule])
+    below = jnp.asarray([jnp.inf if c.below is None else c.below for c in rule])
+    values = jnp.asarray([c.value for c in rule])
+    sustain = jnp.asarray([c.sustain for c in rule])
+
+    def body(runs, sig):
+        runs = jnp.where((sig > above) & (sig < below), runs + 1, 0)
+        return runs, jnp.clip(jnp.sum(jnp.where(runs >= sustain, values, 0.0)), -1.0, 1.0)
+
+    return jax.lax.scan(body, jnp.zeros((len(rule),), jnp.int32), signals)[1]
+
+
 def _scan_decisions(config: TeacherConfig, dt: float, state: TeacherState, signals: jax.Array, key: jax.Array):
     """Decisions of one teacher over (T, C) signals."""
     def body(s, xs):
@@ -265,13 +259,29 @@ def batched_teacher(config: TeacherConfig, dt: float, state: BatchedTeacherState
 # ------------------------------------------------------------------------------------------------
 # Host variant: watches one env, feeds the real queue.
 
+def obs_norm_indices(name: str, obs_size: int) -> tuple[int, ...]:
+    """'obs_norm:64:68,70:74' -> the obs indices whose L2 norm is the signal (e.g. the arm joint speed)."""
+    from mjx_protamer.config import ConfigError
+
+    idx: list[int] = []
+    for part in name[len("obs_norm:"):].split(","):
+        a, b = (int(x) for x in part.split(":"))
+        if not 0 <= a < b <= obs_size:
+            raise ConfigError(f"config field 'feedback.teacher.rule': {name!r} slices outside obs [0, {obs_size})")
+        idx += list(range(a, b))
+    return tuple(idx)
+
+
 def signal_matrix(names: tuple[str, ...], term_names: tuple[str, ...], reward_terms=None, metrics=None,
                   obs=None, action=None) -> np.ndarray:
     """(T, C) signals for a rule from a chunk's per-step arrays: reward terms by name, metrics by key,
     "obs:i" and "action:i"."""
     cols = []
     for name in names:
-        if name.startswith("obs:"):
+        if name.startswith("obs_norm:"):
+            o = np.asarray(obs)
+            cols.append(np.linalg.norm(o[:, list(obs_norm_indices(name, o.shape[1]))], axis=1))
+        elif name.startswith("obs:"):
             cols.append(np.asarray(obs)[:, int(name[4:])])
         elif name.startswith("action:"):
             cols.append(np.asarray(action)[:, int(name[7:])])

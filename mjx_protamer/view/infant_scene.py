@@ -2,8 +2,11 @@
 
 A pose is the model's full `qpos`. Live, the learner only hands over observations and actions; the
 observation holds the arm joints, wrist flexion and fingers (`EnvConfig.qpos_joints`) but not wrist
-rotation and ulnar deviation, which `pose_from_obs` takes from the position targets of the action
-(the servos track them to about 0.01 rad, docs/environment.md): a faithful picture, not the exact state.
+rotation and ulnar deviation, which `chunk_poses` takes from the servo targets: the actions through the
+env's own low-pass (`model.next_ctrl`), carried from one chunk to the next. A faithful picture, not the
+exact state: those two wrist joints lag their targets while moving (up to about 0.5 rad, 30 degrees,
+right after a full-range jump of the action; within 0.1 rad a quarter second later), and after an
+episode reset the carried targets are off until the low-pass has caught up.
 The touched regions of a pose come from native MuJoCo contacts with the env's own sensing rule.
 """
 
@@ -42,18 +45,31 @@ class InfantScene:
                              if int(self.m.jnt_qposadr[mujoco.mj_name2id(self.m, jnt, name)]) not in in_obs]
         k = self.twin.config.k
         self._qpos_at = 4 * (k + 3)
+        self._ctrl: np.ndarray | None = None  # servo targets after the last chunk_poses step
 
     def start_pose(self) -> np.ndarray:
         return np.asarray(self.model.init_qpos, np.float64).copy()
 
-    def pose_from_obs(self, obs: np.ndarray, action: np.ndarray) -> np.ndarray:
+    def pose_from_obs(self, obs: np.ndarray, ctrl: np.ndarray) -> np.ndarray:
+        """The pose of one step: the observed joints, and the others at their servo targets `ctrl`."""
         qpos = self.start_pose()
         idx = self.model.qpos_idx
         qpos[idx] = np.asarray(obs, np.float64)[self._qpos_at:self._qpos_at + len(idx)]
-        ctrl = self.model.action_to_ctrl(np, np.asarray(action, np.float64))
         for a, adr in self._target_only:
             qpos[adr] = ctrl[a]
         return qpos
+
+    def chunk_poses(self, obs: np.ndarray, actions: np.ndarray, continues: bool) -> np.ndarray:
+        """(n, nq) poses of a chunk's steps; `continues`: the chunk follows the previous one, whose last
+        servo targets the low-pass starts from (else from the rest pose's)."""
+        ctrl = self._ctrl if continues and self._ctrl is not None else np.asarray(self.model.rest_ctrl, np.float64)
+        smoothing = self.twin.config.action_smoothing
+        poses = []
+        for o, a in zip(obs, actions):
+            ctrl = self.model.next_ctrl(np, ctrl, np.asarray(a, np.float64), smoothing)
+            poses.append(self.pose_from_obs(o, ctrl))
+        self._ctrl = ctrl
+        return np.stack(poses) if poses else np.zeros((0, self.m.nq))
 
     def touched(self, pose: np.ndarray) -> np.ndarray:
         """The main regions (8,) a hand touches in this pose (native contacts, the env's rule)."""

@@ -83,6 +83,8 @@ class Player:
         names = scene.region_names
         so_far = np.zeros(len(names), bool)
         drawn: tuple[int, int] | None = None  # (chunk first step, step index) last drawn
+        posed: tuple[int, np.ndarray] | None = None  # (chunk first step, its poses)
+        next_step = None  # the step after the last posed chunk
         try:
             while not self._stop.is_set():
                 t_frame = time.time()
@@ -100,7 +102,11 @@ class Player:
                 if drawn is not None and drawn[0] == key[0]:
                     self.skipped += max(0, k - drawn[1] - 1)
                 drawn = key
-                pose = scene.pose_from_obs(snap["obs"][k], snap["action"][k])
+                if posed is None or posed[0] != snap["first_step"]:
+                    posed = (snap["first_step"], scene.chunk_poses(snap["obs"], snap["action"],
+                                                                   snap["first_step"] == next_step))
+                    next_step = snap["first_step"] + n
+                pose = posed[1][k]
                 now = scene.touched(pose)
                 so_far |= now
                 step = snap["first_step"] + k

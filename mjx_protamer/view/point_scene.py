@@ -24,8 +24,8 @@ class PointScene:
     def start_pose(self) -> np.ndarray:
         return np.zeros(4)
 
-    def pose_from_obs(self, obs: np.ndarray, action: np.ndarray) -> np.ndarray:
-        return np.asarray(obs, np.float64)[:4].copy()
+    def chunk_poses(self, obs: np.ndarray, actions: np.ndarray, continues: bool) -> np.ndarray:
+        return np.asarray(obs, np.float64)[:, :4].copy()
 
     def touched(self, pose: np.ndarray) -> np.ndarray:
         pos, goal = pose[:2], pose[2:4]

@@ -1,7 +1,7 @@
 """The scene that draws a run's env: the infant (MuJoCo renderer) or the toy point (2-D drawing).
 
-Every scene has `region_names`, `start_pose()`, `pose_from_obs(obs, action)`, `touched(pose)`,
-`frame(pose, now, before)` and `close()`. The infant needs offscreen OpenGL: `gl.choose_backend()` first.
+Every scene has `region_names`, `start_pose()`, `chunk_poses(obs, actions, continues)` (the poses of a
+chunk's steps), `touched(pose)`, `frame(pose, now, before)` and `close()`. The infant needs offscreen OpenGL: `gl.choose_backend()` first.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def prepare_gl_for(checkpoint) -> str | None:
     run at `checkpoint` is a self-touch run. Returns the backend, or None for a toy run."""
     import yaml
 
-    from mjx_protamer.experiments.evaluate import CONFIG_NAME, resolve_checkpoint
+    from mjx_protamer.experiments.run_loader import CONFIG_NAME, resolve_checkpoint
     from mjx_protamer.view.gl import choose_backend
 
     run_dir = resolve_checkpoint(checkpoint)[0]

@@ -33,7 +33,8 @@ def run_window(run_config, feedback_queue, snapshots, ready) -> None:
     data = mujoco.MjData(scene.m)
     data.qpos[:] = scene.start_pose()
     mujoco.mj_forward(scene.m, data)
-    snap = None
+    snap = poses = None
+    next_step = None
     with mujoco.viewer.launch_passive(scene.m, data, key_callback=on_key) as viewer:
         ready.put((True, None))
         while viewer.is_running():
@@ -42,12 +43,13 @@ def run_window(run_config, feedback_queue, snapshots, ready) -> None:
                     got = snapshots.get_nowait()
                     if got is None:
                         return
-                    snap = got
+                    poses = scene.chunk_poses(got["obs"], got["action"], got["first_step"] == next_step)
+                    snap, next_step = got, got["first_step"] + len(got["obs"])
             except queue_lib.Empty:
                 pass
             if snap is not None:
                 k = int(np.clip((time.time() - snap["t0"]) / snap["dt"], 0, len(snap["obs"]) - 1))
-                data.qpos[:] = scene.pose_from_obs(snap["obs"][k], snap["action"][k])
+                data.qpos[:] = poses[k]
                 mujoco.mj_forward(scene.m, data)
                 viewer.sync()
             time.sleep(1 / 60)

@@ -126,3 +126,17 @@ def speech():
         "bad": synthesize("bad", "angry", speed=120),
         "hmm": synthesize("hmm", "filler"),
     }
+
+
+@pytest.fixture(scope="session")
+def small_set(tmp_path_factory):
+    """A small `protamer synth-voice` set: two voices, three sentences per tone and kind (made once)."""
+    from voice_helpers import need_synth
+
+    need_synth()
+    pytest.importorskip("parselmouth")
+    from audio_frontend.testset import make_test_set
+
+    root = tmp_path_factory.mktemp("synth_voice")
+    make_test_set(root, speakers=("en-us", "en-gb+f2"), max_per_group=3)
+    return root

@@ -61,3 +61,28 @@ def test_resolve_tau_prefers_config_then_file(tmp_path):
     write_calibration(path, {"tau": 0.3})
     assert resolve_tau(voice_config(f"prosody.calibration_path={path}").prosody)[0] == pytest.approx(0.3)
     assert resolve_tau(voice_config(f"prosody.calibration_path={path}", "prosody.tau=0.7").prosody)[0] == 0.7
+
+
+@pytest.mark.parametrize("tau,why", [(1e-30, "outside"), (1e308, "outside"), (True, "must be a number"),
+                                     ("0.5", "must be a number"), (None, "must be a number"), (2.0, "outside")])
+def test_loading_applies_the_bounds_calibrate_writes_with(tmp_path, tau, why):
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps({"tau": tau}))
+    with pytest.raises(CalibrationError, match=f"{why}.*protamer calibrate"):
+        load_calibration(path)
+    path.write_text('{"tau": NaN}')
+    with pytest.raises(CalibrationError, match="not finite"):
+        load_calibration(path)
+    path.write_text("[0.5]")
+    with pytest.raises(CalibrationError, match="no 'tau'"):
+        load_calibration(path)
+
+
+def test_config_tau_has_the_same_bounds():
+    from mjx_protamer.config import ConfigError
+
+    assert voice_config("prosody.tau=1").prosody.tau == 1
+    with pytest.raises(ConfigError, match="prosody.tau.*outside"):
+        voice_config("prosody.tau=0.00001")
+    with pytest.raises(ConfigError, match="prosody.tau.*outside"):
+        voice_config("prosody.tau=5")

@@ -1,6 +1,5 @@
 """The host process (in-process loop and spawned Process) and the voice commands."""
 
-import argparse
 import json
 import time
 
@@ -11,7 +10,7 @@ import soundfile as sf
 from audio_frontend.synth import with_silence
 from mjx_protamer.human.events import validate_event
 from mjx_protamer.human.queue import FeedbackQueue
-from voice_helpers import SR, voice_config, write_wav
+from voice_helpers import SR, run_cli, voice_config, write_wav
 
 pytestmark = pytest.mark.audio
 
@@ -22,21 +21,13 @@ def two_utterances(speech):
     return np.concatenate([a, b]), (1.0, a.size / SR)
 
 
-def run_cli(*argv):
-    from mjx_protamer.commands import voice
-    p = argparse.ArgumentParser()
-    voice.register(p.add_subparsers())
-    args = p.parse_args(list(argv))
-    return args.handler(args)
-
-
 def test_run_listener_one_event_per_utterance_with_times_and_saved_segments(tiny_models, speech, tmp_path):
     from audio_frontend.listen import run_listener
     from audio_frontend.scorers import ProsodyScorer
     from audio_frontend.sources import ArraySource
 
     x, (on1, on2) = two_utterances(speech)
-    cfg = voice_config(f"prosody.model={tiny_models['prosody_hap']}", "prosody.tau=0.5")
+    cfg = voice_config("prosody.kind=wav2vec2", f"prosody.model={tiny_models['prosody_hap']}", "prosody.tau=0.5")
     q = FeedbackQueue()
     t0 = time.time() - x.size / SR - 1.0      # as if the audio had just been captured
     stats = run_listener(q, cfg, ProsodyScorer(cfg), ArraySource(x, SR, 0.25, t0=t0), save_dir=str(tmp_path), log=None)
@@ -59,7 +50,7 @@ def test_start_listener_process_puts_events_and_reports_death(tiny_models, speec
 
     x, _ = two_utterances(speech)
     q = FeedbackQueue()
-    cfg = voice_config(f"prosody.model={tiny_models['prosody_hap']}", "prosody.tau=0.5")
+    cfg = voice_config("prosody.kind=wav2vec2", f"prosody.model={tiny_models['prosody_hap']}", "prosody.tau=0.5")
     proc = start_listener(q, cfg, scorer="prosody", source=ArraySource(x, SR, 0.25, t0=time.time() - 10))
     events = []
     deadline = time.time() + 90
@@ -69,7 +60,7 @@ def test_start_listener_process_puts_events_and_reports_death(tiny_models, speec
     assert len(events) == 2 and all(e.source == "prosody" for e in events)
     assert proc.exitcode == 0 and "stopped normally" in listener_status(proc)
     # missing weights: the process exits with the MissingWeightsError code and the learner is told
-    bad = voice_config(f"prosody.model={tmp_path / 'absent'}", "prosody.tau=0.5")
+    bad = voice_config("prosody.kind=wav2vec2", f"prosody.model={tmp_path / 'absent'}", "prosody.tau=0.5")
     proc = start_listener(q, bad, scorer="prosody", source=ArraySource(x, SR, 0.25))
     proc.join(60)
     assert proc.exitcode == 5
@@ -89,7 +80,8 @@ def labelled_dir(tmp_path, speech):
 
 
 def test_validate_voice_reports_accuracy_confusion_and_bad_files(tiny_models, labelled_dir, capsys):
-    rc = run_cli("validate-voice", str(labelled_dir), "--json", "--set", f"prosody.model={tiny_models['prosody_hap']}")
+    w2v = ["--set", "prosody.kind=wav2vec2", "--set", f"prosody.model={tiny_models['prosody_hap']}"]
+    rc = run_cli("validate-voice", str(labelled_dir), "--json", *w2v)
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     # the tiny model always hears 'hap': positives right, negatives wrong
@@ -98,16 +90,16 @@ def test_validate_voice_reports_accuracy_confusion_and_bad_files(tiny_models, la
     assert out["n_errors"] == 1 and out["n_scored"] == 6 and out["mean_latency_s"] > 0
     assert any("broken.wav" in r["file"] and "not a readable" in r["error"] for r in out["rows"])
     assert out["skipped_unlabelled"][0].endswith("unlabelled.wav")
-    rc = run_cli("validate-voice", str(labelled_dir), "--set", f"prosody.model={tiny_models['prosody_hap']}")
+    rc = run_cli("validate-voice", str(labelled_dir), *w2v)
     table = capsys.readouterr().out
-    assert "sign accuracy: 0.500 over 6 recordings (1 unusable)" in table and "confusion" in table
+    assert "sign accuracy: 0.500 over 6 signed recordings (1 unusable)" in table and "outcomes" in table
 
 
 def test_calibrate_refuses_one_sign_and_writes_a_good_calibration(tiny_models, labelled_dir, tmp_path, capsys,
                                                                    monkeypatch):
     out = tmp_path / "cal.json"
     base = ["calibrate", "--wav-dir", str(labelled_dir), "--out", str(out),
-            "--set", f"prosody.model={tiny_models['prosody_hap']}"]
+            "--set", "prosody.kind=wav2vec2", "--set", f"prosody.model={tiny_models['prosody_hap']}"]
     assert run_cli(*base) == 6                     # the tiny model gives every sample positive valence
     assert "all 6 samples have positive valence" in capsys.readouterr().err and not out.exists()
     # a scorer whose valence follows the folder label: calibration succeeds, tau = median |valence|
@@ -129,10 +121,11 @@ def test_listen_command_on_a_wav_and_missing_calibration(tiny_models, speech, tm
     x, _ = two_utterances(speech)
     wav = write_wav(tmp_path / "session.wav", x)
     model = f"prosody.model={tiny_models['prosody_hap']}"
-    rc = run_cli("listen", "--wav", str(wav), "--set", model, "--set", f"prosody.calibration_path={tmp_path / 'no.json'}")
+    rc = run_cli("listen", "--wav", str(wav), "--set", "prosody.kind=wav2vec2", "--set", model,
+                 "--set", f"prosody.calibration_path={tmp_path / 'no.json'}")
     assert rc == 6 and "protamer calibrate" in capsys.readouterr().err
-    rc = run_cli("listen", "--wav", str(wav), "--set", model, "--set", "prosody.tau=0.5",
-                 "--save-segments", str(tmp_path / "segs"), "--log", str(tmp_path / "fb.jsonl"))
+    rc = run_cli("listen", "--wav", str(wav), "--set", "prosody.kind=wav2vec2", "--set", model,
+                 "--set", "prosody.tau=0.5", "--save-segments", str(tmp_path / "segs"), "--log", str(tmp_path / "fb.jsonl"))
     assert rc == 0
     events = [json.loads(line_) for line_ in capsys.readouterr().out.splitlines()]
     assert len(events) == 2 and {e["source"] for e in events} == {"prosody"}
@@ -141,5 +134,6 @@ def test_listen_command_on_a_wav_and_missing_calibration(tiny_models, speech, tm
     assert len(FeedbackLog.read(tmp_path / "fb.jsonl")) == 2
     empty = tmp_path / "empty.wav"
     empty.write_bytes(b"")
-    assert run_cli("listen", "--wav", str(empty), "--set", model, "--set", "prosody.tau=0.5") == 3
+    assert run_cli("listen", "--wav", str(empty), "--set", "prosody.kind=wav2vec2", "--set", model,
+                   "--set", "prosody.tau=0.5") == 3
     assert "empty" in capsys.readouterr().err

@@ -18,7 +18,8 @@ def noise(seconds=1.0, seed=0):
 def test_prosody_valence_from_id2label_and_tanh_reward(tiny_models):
     from audio_frontend.scorers import ProsodyScorer
 
-    s = ProsodyScorer(voice_config(f"prosody.model={tiny_models['prosody_hap']}", "prosody.tau=0.3"))
+    s = ProsodyScorer(voice_config("prosody.kind=wav2vec2", f"prosody.model={tiny_models['prosody_hap']}",
+                                   "prosody.tau=0.3"))
     value, d = s.score(noise())
     probs = d["probs"]
     assert set(probs) == {"neu", "hap", "ang", "sad"} and sum(probs.values()) == pytest.approx(1, abs=1e-5)
@@ -26,7 +27,8 @@ def test_prosody_valence_from_id2label_and_tanh_reward(tiny_models):
     assert d["valence"] > 0.5 and d["label"] == "hap"
     assert value == pytest.approx(math.tanh(d["valence"] / 0.3))
     # another label order, 'ang' favoured: labels are read by name, so valence is negative
-    s2 = ProsodyScorer(voice_config(f"prosody.model={tiny_models['prosody_ang_permuted']}", "prosody.tau=0.3"))
+    s2 = ProsodyScorer(voice_config("prosody.kind=wav2vec2", f"prosody.model={tiny_models['prosody_ang_permuted']}",
+                                    "prosody.tau=0.3"))
     v2, d2 = s2.score(noise())
     assert d2["label"] == "ang" and d2["valence"] < -0.5 and v2 < 0
 
@@ -85,7 +87,7 @@ def test_rule_layer_overrides_the_real_classifier(tiny_models):
 
     asr = FixedTranscript()
     scorer = WhisperScorer(voice_config(f"sentiment.model={tiny_models['sentiment']}"), transcriber=asr)
-    asr.text = "that was very nice"                    # classifier (the tiny one always says POSITIVE)
+    asr.text = "the robot is doing very well"          # no keyword: classifier (the tiny one says POSITIVE)
     v, d = scorer.score(noise())
     assert (v, d["rule"], d["label"]) == (1.0, "classifier", "POSITIVE")
     asr.text = "No!"                                   # keyword beats the POSITIVE-biased classifier

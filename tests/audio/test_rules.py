@@ -40,9 +40,20 @@ def test_other_sentences_go_to_the_classifier(rules):
     d = rules.decide("Hmm, you touched your hand", classify)
     assert (d.value, d.rule, d.label) == (1, "classifier", "POSITIVE")
     assert seen == ["that was not nice", "you touched your hand"]   # fillers removed before classifying
-    assert rules.decide("yes I think so", classify).rule == "classifier"   # more than one keyword's worth
+    assert rules.decide("yes and no I think", classify).rule == "classifier"   # keywords of both signs
+    assert rules.decide("that is not bad", classify).rule == "classifier"      # a negator turns keywords around
+    # a classifier that says neither (VADER below its threshold) gives no feedback
+    d = rules.decide("something else", lambda t: ("NEUTRAL", 0.01))
+    assert (d.value, d.rule, d.label) == (0, "classifier", "NEUTRAL")
     with pytest.raises(ValueError, match="neither positive"):
-        rules.decide("something else", lambda t: ("NEUTRAL", 1.0))
+        rules.decide("something else", lambda t: ("MIXED", 1.0))
+
+
+@pytest.mark.parametrize("text,value", [("No, wrong way", -1), ("stop it now", -1), ("yes, that was great", 1),
+                                        ("well done, keep going", 1)])
+def test_keywords_of_one_sign_in_a_sentence_decide(rules, text, value):
+    d = rules.decide(text, never)
+    assert (d.value, d.rule) == (value, "keyword_vote")
 
 
 def test_without_a_classifier_undecided_text_is_neutral(rules):
@@ -71,4 +82,4 @@ def test_config_validation_names_the_field():
     with pytest.raises(ConfigError, match="prosody.tau"):
         voice_config("prosody.tau=0")
     with pytest.raises(ConfigError, match="vad.kind"):
-        voice_config("vad.kind=silero")
+        voice_config("vad.kind=energy")

@@ -123,3 +123,22 @@ def test_no_input_device_is_a_clear_error(monkeypatch):
     monkeypatch.setattr(s, "import_sounddevice", lambda: fake)
     with pytest.raises(AudioDeviceError, match="no usable audio input device.*found 0 input"):
         check_input_device()
+
+
+def test_a_wav_cut_short_is_reported_as_truncated(tmp_path, capsys):
+    from voice_helpers import run_cli
+
+    whole = write_wav(tmp_path / "whole.wav", tone(300, 2.0))
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.wav"
+    cut.write_bytes(data[: len(data) // 3])            # the header still says 2 s
+    with pytest.raises(AudioInputError, match=r"cut.wav: truncated: its header declares 2.00 s .* holds 0.6"):
+        load_wav(cut)
+    header_only = tmp_path / "header.wav"
+    header_only.write_bytes(data[:44])
+    with pytest.raises(AudioInputError, match="truncated.*holds 0.00 s"):
+        load_wav(header_only)
+    assert load_wav(whole).size == 2 * SR                # a complete file is untouched
+    assert run_cli("listen", "--wav", str(cut), "--set", "prosody.tau=0.5") == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "truncated" in err[0]

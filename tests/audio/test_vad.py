@@ -111,3 +111,34 @@ def test_webrtc_vad_finds_speech_and_ignores_tones_and_clicks(speech):
     for sig in (hum, clicks):
         assert len(segment_array(sig.astype(np.float32), vad(), SR, 0.25)) == 1
         assert segment_array(sig.astype(np.float32), vad(kind="webrtc"), SR, 0.25) == []
+
+
+def test_silero_vad_finds_speech_in_noise_and_ignores_hum_clicks_and_noise(speech):
+    pytest.importorskip("silero_vad")
+    x = np.concatenate([silence(1.0, -35), speech["good job"], silence(1.5, -35, 1)])
+    segs = segment_array(x, vad(kind="silero"), SR, 0.25)
+    assert len(segs) == 1 and 0.75 <= segs[0].t_onset <= 1.5
+    assert len(segment_array(x, vad(), SR, 0.25)) >= 1 and segment_array(x, vad(), SR, 0.25)[0].t_onset < 0.5
+    # a room's steady hum at -30 dBFS, clicks and white noise: RMS (-40 dBFS) takes each for speech.
+    # (A pure tone switched on out of digital silence does trigger silero at its onset; rooms hum throughout.)
+    hum = burst(4.0, 0.045, 220)
+    clicks = np.concatenate([silence(1.0), np.where(np.arange(2 * SR) % 4000 < 40, 0.8, 0.0), silence(1.0)])
+    for sig in (hum, clicks, silence(3.0, -30)):
+        assert len(segment_array(sig.astype(np.float32), vad(), SR, 0.25)) >= 1
+        assert segment_array(sig.astype(np.float32), vad(kind="silero"), SR, 0.25) == []
+
+
+def test_vad_benchmark_counts_misses_and_false_alarms():
+    from audio_frontend.vad import Segment
+    from audio_frontend.vad_compare import count_errors
+
+    def seg(a, b):
+        return Segment(np.zeros(1, np.float32), a, b, a, SR, "quiet")
+    truth = [(1.0, 2.0), (4.0, 5.0), (8.0, 9.0)]
+    # one segment per utterance but the third is missed; a segment over pure noise is a false alarm
+    assert count_errors([seg(0.8, 2.2), seg(3.9, 5.3), seg(6.0, 6.8)], truth) == (1, 1)
+    assert count_errors([], truth) == (3, 0)
+    from audio_frontend.vad_compare import noise_covered
+    # away from speech: 0-0.5, 2.75-3.5, 5.75-7.5, 9.75-10 s = 3.25 s; the 6.0-6.8 segment covers 0.8 s of it
+    covered, away = noise_covered([seg(0.8, 2.2), seg(3.9, 5.3), seg(6.0, 6.8)], truth, 10.0)
+    assert covered == pytest.approx(0.8, abs=0.02) and away == pytest.approx(3.25, abs=0.02)

@@ -32,3 +32,14 @@ def write_wav(path, x, sr=SR, subtype="PCM_16"):
 
 def has_espeak() -> bool:
     return shutil.which("espeak-ng") is not None and shutil.which("sox") is not None
+
+
+def run_cli(*argv):
+    """A voice command in this process; returns its exit code."""
+    import argparse
+
+    from mjx_protamer.commands import voice
+    p = argparse.ArgumentParser()
+    voice.register(p.add_subparsers())
+    args = p.parse_args(list(argv))
+    return args.handler(args)

@@ -13,7 +13,7 @@ from mjx_protamer.envs.toy import PointReachEnv
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
 from mjx_protamer.experiments.pretrain import run_pretrain
 
-from ddpg_helpers import tiny_config
+from ddpg_helpers import replace_train, tiny_config
 
 
 def test_ddpg_solves_point_reach(learned_run):
@@ -56,8 +56,10 @@ def test_outputs_written(learned_run):
 
 
 def test_resume_is_exact(learned_run, tmp_path):
-    """Kill after 2 of 6 chunks (checkpoint every chunk), resume: same params as the uninterrupted run."""
-    config, _, full = learned_run
+    """Kill after 2 of 6 chunks (checkpoint every chunk), resume: same params as the uninterrupted run.
+    (The checkpoint period does not change training; the learned run checkpoints every 5 chunks.)"""
+    _, _, full = learned_run
+    config = replace_train(learned_run[0], checkpoint_every_chunks=1)
     first = run_pretrain(config, tmp_path, progress=False, max_chunks=2, final_eval=False)
     assert not first["finished"] and first["chunks_done"] == 2
     resumed = run_pretrain(config, tmp_path, resume=True, progress=False, final_eval=False)

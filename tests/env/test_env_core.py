@@ -118,7 +118,7 @@ def test_hand_to_hand_contact_touches_both_hands(model, np_tables):
 
 
 def test_reward_terms_match_hand_computed_values():
-    cfg = RewardConfig()
+    cfg = RewardConfig.preset("paper")
     touch = np.array([0.5, -1.5, 2.0])
     prev = np.array([0.5, 0.5, 0.0])
     regions = np.array([True, False, True])
@@ -131,6 +131,32 @@ def test_reward_terms_match_hand_computed_values():
     stale = reward_terms(np, cfg, touch, prev, regions, regions, 0.5, torque, action)
     assert stale[2] == -1.0 and stale[3] == -0.5
     assert reward_terms(np, cfg, touch, prev, regions, regions, 3.5, torque, action)[3] == -0.5
+
+
+def test_infant_reward_pays_for_touching_not_pressing_hand_computed():
+    """The infant preset: contact tanh(2 sum|touch|) (a 1 N touch earns 0.96 of a 20 N press, where the paper's
+    4 tanh(0.05 sum) pays 0.2 against 2.5); novelty on tanh(touch / 1 N), at most 1."""
+    cfg = RewardConfig()
+    assert cfg == RewardConfig.preset("infant") and RewardConfig.preset("paper").contact_scale == 4.0
+    z = np.zeros(3)
+    light, hard = np.array([1.0, 0, 0]), np.array([20.0, 0, 0])
+    c_light = reward_terms(np, cfg, light, light, z > 0, z > 0, 2.0, z, z)[0]
+    c_hard = reward_terms(np, cfg, hard, hard, z > 0, z > 0, 2.0, z, z)[0]
+    assert c_light == pytest.approx(math.tanh(2.0)) and c_hard == pytest.approx(1.0)
+    paper = RewardConfig.preset("paper")
+    assert reward_terms(np, paper, light, light, z > 0, z > 0, 2.0, z, z)[0] == pytest.approx(4 * math.tanh(0.05))
+    touch, prev = np.array([0.5, -1.5, 2.0]), np.array([0.5, 0.5, 0.0])
+    novelty = reward_terms(np, cfg, touch, prev, z > 0, z > 0, 2.0, z, z)[1]
+    by_hand = math.sqrt((math.tanh(-1.5) - math.tanh(0.5)) ** 2 + math.tanh(2.0) ** 2)  # 1.57 before the clip
+    assert by_hand > 1.0 and novelty == 1.0
+    small = reward_terms(np, cfg, np.array([0.1, 0, 0]), z, z > 0, z > 0, 2.0, z, z)[1]
+    assert small == pytest.approx(math.tanh(0.1))
+
+
+def test_reward_preset_by_name_in_a_config(tmp_path):
+    assert load_config(EnvConfig, None, ["reward=paper"]).reward == RewardConfig.preset("paper")
+    with pytest.raises(ConfigError, match="unknown preset 'babyish'"):
+        load_config(EnvConfig, None, ["reward=babyish"])
 
 
 def test_config_errors_name_the_field(tmp_path):

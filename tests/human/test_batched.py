@@ -6,6 +6,7 @@ import numpy as np
 import optax
 
 from mjx_protamer.human.batched import credit_windows, ring_add, ring_init, tamer_update
+from mjx_protamer.human.channels import ChannelConfig
 from mjx_protamer.human.clock import StepClock
 from mjx_protamer.human.credit import CreditAssigner, CreditConfig, lag_weights
 from mjx_protamer.human.events import FeedbackEvent
@@ -13,12 +14,16 @@ from mjx_protamer.human.reward_model import RewardMLP, reward_fn
 
 
 def test_lag_weights_match_the_host_credit_on_a_regular_clock():
-    for scheme in ("step_window", "time_window"):
+    """In-jit lag weights from the arrival step = the host credit of an event whose onset is the arrival less
+    the channel's utterance and pipeline latency (0 for the other schemes, which take the arrival time)."""
+    speech = ChannelConfig("speech")
+    for scheme in ("channel", "step_window", "time_window"):
         cfg = CreditConfig(scheme=scheme, min_interval_steps=0)
         clock = StepClock(dt=0.05)
         clock.record_chunk(0, 200, t0=0.0)
-        credit, _ = CreditAssigner(cfg, clock).assign(FeedbackEvent(150 * 0.05, 150 * 0.05, "simulated", 1.0))
-        w = lag_weights(cfg, 0.05)
+        onset = 150 * 0.05 - (speech.arrival_offset_s if scheme == "channel" else 0.0)
+        credit, _ = CreditAssigner(cfg, clock, speech).assign(FeedbackEvent(onset, onset, "simulated", 1.0))
+        w = lag_weights(cfg, 0.05, speech)
         host = dict(zip(credit.steps, credit.weights))
         jit = {150 - j: float(w[j]) for j in range(len(w)) if w[j] > 0}
         assert host.keys() == jit.keys()

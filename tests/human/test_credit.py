@@ -1,8 +1,9 @@
-"""Credit weights of both schemes against hand-computed values; the minimum interval; the step clock."""
+"""Credit weights of the three schemes against hand-computed values; the minimum interval; the step clock."""
 
 import numpy as np
 import pytest
 
+from mjx_protamer.human.channels import ChannelConfig, delay_cdf
 from mjx_protamer.human.clock import StepClock
 from mjx_protamer.human.credit import (CreditAssigner, CreditConfig, StepHistory, step_window_weights,
                                        time_window_weight)
@@ -42,7 +43,7 @@ def test_step_window_credit_lands_on_the_shown_step():
 def test_step_window_near_the_start_credits_only_existing_steps():
     clock = StepClock(dt=0.005)
     clock.record_chunk(0, 10, t0=0.0)
-    credit, _ = CreditAssigner(CreditConfig(), clock).assign(at(0.016))
+    credit, _ = CreditAssigner(CreditConfig(scheme="step_window"), clock).assign(at(0.016))
     assert credit.steps == (3, 2, 1, 0)
     np.testing.assert_allclose(credit.weights, [1.0, 0.9, 0.81, 0.729])
 
@@ -50,7 +51,7 @@ def test_step_window_near_the_start_credits_only_existing_steps():
 def test_minimum_interval_between_accepted_feedbacks():
     clock = StepClock(dt=1.0)
     clock.record_chunk(0, 100, t0=0.0)
-    ca = CreditAssigner(CreditConfig(min_interval_steps=5), clock)
+    ca = CreditAssigner(CreditConfig(scheme="step_window", min_interval_steps=5), clock)
     assert ca.assign(at(50.5))[0].step == 50
     credit, why = ca.assign(at(54.5))
     assert credit is None and "within 5 steps" in why
@@ -96,8 +97,36 @@ def test_step_history_samples_skip_forgotten_steps():
     hist.record(0, np.arange(24, dtype=np.float32).reshape(12, 2), np.arange(12, dtype=np.float32)[:, None])
     clock = StepClock(dt=1.0)
     clock.record_chunk(0, 12, t0=0.0)
-    credit, _ = CreditAssigner(CreditConfig(), clock).assign(at(11.5, value=-1.0))
+    credit, _ = CreditAssigner(CreditConfig(scheme="step_window"), clock).assign(at(11.5, value=-1.0))
     obs, act, w, h = hist.samples(credit)
     assert act[:, 0].tolist() == [11, 10, 9, 8, 7, 6, 5, 4]  # steps 0..3 were overwritten
     np.testing.assert_allclose(w, 0.9 ** np.arange(8), rtol=1e-6)
     assert (h == -1.0).all()
+
+
+def test_channel_credit_lands_where_the_person_was_looking():
+    """A key press 0.35 +- 0.1 s after the judged step: at 200 Hz the credit peaks about 70 steps back,
+    each step's weight is the delay's probability mass over the step's span, and the weights sum to ~1."""
+    keyboard = ChannelConfig("keyboard")
+    clock = StepClock(dt=0.005)
+    clock.record_chunk(0, 400, t0=0.0)
+    credit, why = CreditAssigner(CreditConfig(min_interval_steps=0), clock, keyboard).assign(at(300 * 0.005))
+    assert why is None and credit.step == 300
+    w = dict(zip(credit.steps, credit.weights))
+    assert sum(w.values()) == pytest.approx(1.0, abs=0.002)
+    # step 230 spans [1.150, 1.155): the event at 1.5 s is 0.345..0.350 s after it
+    assert w[230] == pytest.approx(delay_cdf(0.350, keyboard) - delay_cdf(0.345, keyboard), rel=1e-9)
+    assert w[230] == pytest.approx(0.0199, abs=0.0005)  # Normal pdf at 0.35 (3.99 / s) x 5 ms
+    assert max(credit.steps) < 300 - 29  # nothing inside the 0.15 s fastest reaction
+    assert 300 - 70 in credit.steps and 300 - 15 not in credit.steps  # the authors' 15-step window is empty
+    # a channel credit needs its channel
+    with pytest.raises(ValueError, match="channel"):
+        CreditAssigner(CreditConfig(), clock)
+
+
+def test_channel_delay_cdf_hand_computed():
+    ch = ChannelConfig("keyboard", delay_mean_s=1.0, delay_std_s=0.5, delay_min_s=0.2)
+    assert delay_cdf(0.1, ch) == 0.0  # below the fastest reaction
+    assert delay_cdf(1.0, ch) == pytest.approx(0.5)
+    assert delay_cdf(1.5, ch) == pytest.approx(0.8413447, rel=1e-6)
+    assert delay_cdf(0.2, ch) == pytest.approx(0.0547993, rel=1e-5)  # the mass below 0.2 s sits at 0.2 s

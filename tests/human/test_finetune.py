@@ -342,7 +342,8 @@ def test_finetune_prosody_with_a_tiny_offline_wav2vec2(toy_run, tmp_path):
     model = _tiny_prosody_model(tmp_path / "w2v")
     out = tmp_path / "ft"
     p = _finetune_voice(toy_run, out, "--feedback", "prosody", "--listen-source", f"wav:{wav}",
-                        "--voice-set", f"prosody.model={model}", "--voice-set", "prosody.tau=0.5")
+                        "--voice-set", "prosody.kind=wav2vec2", "--voice-set", f"prosody.model={model}",
+                        "--voice-set", "prosody.tau=0.5")
     text = p.stdout + p.stderr
     assert p.returncode == 0, text
     events = FeedbackLog.read(out / "feedback.jsonl")
@@ -352,17 +353,34 @@ def test_finetune_prosody_with_a_tiny_offline_wav2vec2(toy_run, tmp_path):
 
 
 @pytest.mark.audio
-def test_listener_without_weights_dies_and_the_learner_goes_on(toy_run, tmp_path):
+def test_listener_that_dies_lets_the_learner_go_on_and_the_exit_code_says_so(toy_run, tmp_path):
     wav = _speech_wav(tmp_path / "speech.wav")
+    model = Path(_tiny_prosody_model(tmp_path / "w2v"))
+    # weights present (the check before loading passes) but corrupt: the listener dies when it loads them
+    for f in model.glob("*.safetensors"):
+        f.write_bytes(b"not safetensors")
     out = tmp_path / "ft"
     p = _finetune_voice(toy_run, out, "--feedback", "prosody", "--listen-source", f"wav:{wav}", "--max-chunks", "80",
-                        "--voice-set", f"prosody.model={tmp_path / 'no-such-model'}", "--voice-set", "prosody.tau=0.5")
+                        "--voice-set", "prosody.kind=wav2vec2", "--voice-set", f"prosody.model={model}",
+                        "--voice-set", "prosody.tau=0.5")
     text = p.stdout + p.stderr
-    assert p.returncode == 0, text
-    assert "no-such-model" in text  # the listener names the folder it expected
+    assert p.returncode == 5, text
     said = "voice listener died with exit code 5 (MissingWeightsError"
     assert text.count(said) == 1 and "training goes on without voice feedback" in text
     assert "[step    4000]" in text and (out / "checkpoints").is_dir()
+    assert "exit code 5: the voice listener died during the session" in text
+
+
+@pytest.mark.audio
+def test_missing_weights_fail_before_the_learner_loads(toy_run, tmp_path):
+    wav = _speech_wav(tmp_path / "speech.wav")
+    out = tmp_path / "ft"
+    p = _finetune_voice(toy_run, out, "--feedback", "prosody", "--listen-source", f"wav:{wav}",
+                        "--voice-set", "prosody.kind=wav2vec2", "--voice-set", f"prosody.model={tmp_path / 'no-such'}",
+                        "--voice-set", "prosody.tau=0.5")
+    text = p.stdout + p.stderr
+    assert p.returncode == 5 and "no-such" in text and "[finetune] loading" not in text, text
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("learner", ["ddpg", "coach"])

@@ -15,7 +15,7 @@ class SlowScene:
     def __init__(self):
         self.drawn: list[float] = []
 
-    def pose_from_obs(self, obs, action):
+    def chunk_poses(self, obs, actions, continues):
         return np.asarray(obs)
 
     def touched(self, pose):

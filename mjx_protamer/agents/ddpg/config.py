@@ -2,6 +2,7 @@
 
 The defaults of `DDPGConfig` are the paper's reference learner (spec, "The reference learners"): actor and
 critic 400-300, Adam 1e-3 both, gamma 0.99, tau 0.001, batch 64, replay 1e5, OU noise theta 0.15 sigma 0.6.
+Every float is also checked finite by the loader (`mjx_protamer.config`).
 `TrainConfig` says how the learner meets the env: how many envs step together, for how long, how many
 gradient updates per vectorised env step, and how the run is cut into jitted chunks.
 """
@@ -43,6 +44,7 @@ class DDPGConfig:
     # Sample-time reward: alpha * (reward_terms @ env weights) + beta * human_reward_fn(params, obs, action).
     reward_alpha: float = 1.0
     reward_beta: float = 0.1
+    actor_preact_coef: float = 0.0  # penalty on the actor's pre-tanh activations (losses.actor_loss)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -54,7 +56,10 @@ class DDPGConfig:
         check(self.critic_lr > 0, "critic_lr", f"must be > 0, got {self.critic_lr}")
         check(0.0 <= self.gamma < 1.0, "gamma", f"must be in [0, 1), got {self.gamma}")
         check(0.0 < self.tau <= 1.0, "tau", f"must be in (0, 1], got {self.tau}")
+        check(self.actor_preact_coef >= 0, "actor_preact_coef", f"must be >= 0, got {self.actor_preact_coef}")
         check(self.batch_size >= 1, "batch_size", f"must be >= 1, got {self.batch_size}")
+        check(self.reward_alpha >= 0.0, "reward_alpha", f"must be >= 0, got {self.reward_alpha}")
+        check(self.reward_beta >= 0.0, "reward_beta", f"must be >= 0, got {self.reward_beta}")
         check(self.replay_size >= self.batch_size, "replay_size",
               f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")
 
@@ -82,7 +87,8 @@ class TrainConfig:
         check(self.total_env_steps >= self.num_envs, "total_env_steps",
               f"must be >= num_envs ({self.num_envs}), got {self.total_env_steps}")
         check(self.warmup_env_steps >= 0, "warmup_env_steps", f"must be >= 0, got {self.warmup_env_steps}")
-        check(self.updates_per_step >= 0, "updates_per_step", f"must be >= 0, got {self.updates_per_step}")
+        check(self.updates_per_step >= 1, "updates_per_step",
+              f"must be >= 1 (0 would only collect data and learn nothing), got {self.updates_per_step}")
         check(self.chunk_steps >= 1, "chunk_steps", f"must be >= 1, got {self.chunk_steps}")
         check(self.checkpoint_every_chunks >= 1, "checkpoint_every_chunks",
               f"must be >= 1, got {self.checkpoint_every_chunks}")
@@ -106,10 +112,13 @@ class TrainConfig:
 
 
 def batched_ddpg() -> DDPGConfig:
-    """The batched default's learner: the paper's, with OU sigma 0.3 and tau 0.005. With the paper's sigma 0.6
-    (stationary std 1.14, so most actions saturate) and tau 0.001, batched self-touch training collapses
-    after ~30k env steps (training contact rate 0.7 -> 0.07; test contact rate 0.01)."""
-    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.15, sigma=0.3))
+    """The batched default's learner: the paper's, with tau 0.005 and exploration on a human time scale.
+
+    OU theta 0.01 (correlation time 100 steps = 0.5 s) with sigma 0.042 (stationary std 0.3): the paper's
+    theta 0.15 changes the target every 5 ms step, and stiff 200 Hz servos turn that into 10-20 rad/s of
+    jitter (the movement band is then never met and the critic never sees a slow or frozen arm). With the
+    paper's sigma 0.6 and tau 0.001, batched self-touch training collapses after ~30k env steps."""
+    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042))
 
 
 @dataclass(frozen=True)

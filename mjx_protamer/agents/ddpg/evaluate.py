@@ -17,7 +17,8 @@ def make_rollout(env, episode_length: int, actor_hidden=(400, 300)):
         state = jax.vmap(env.reset)(keys)
 
         def step(state, _):
-            action = actor.apply(actor_params, state.obs)
+            obs = state.obs
+            action = actor.apply(actor_params, obs)
             state = jax.vmap(env.step)(state, action)
             m = state.metrics
             zeros = jnp.zeros_like(state.reward)
@@ -26,6 +27,10 @@ def make_rollout(env, episode_length: int, actor_hidden=(400, 300)):
                 "self_contact": m.get("self_contact", zeros),
                 "region_mask": m.get("region_mask", jnp.zeros(state.reward.shape + (8,))),
                 "arm_speed": m.get("arm_speed", zeros),
+                # what a simulated teacher and the reward model read (teacher_score, r_hat_corr_test)
+                "obs": obs,
+                "action": action,
+                "reward_terms": m["reward_terms"],
             }
             return state, signals
 

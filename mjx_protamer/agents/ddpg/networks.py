@@ -26,12 +26,12 @@ class Actor(nn.Module):
     hidden: Sequence[int] = (400, 300)
 
     @nn.compact
-    def __call__(self, obs: jax.Array) -> jax.Array:
+    def __call__(self, obs: jax.Array, pre_tanh: bool = False) -> jax.Array:
         x = obs
         for width in self.hidden:
             x = nn.relu(nn.Dense(width)(x))
         x = nn.Dense(self.action_size, kernel_init=_centred(_final_init), bias_init=_centred(_final_init))(x)
-        return jnp.tanh(x)  # actions live in [-1, 1]
+        return x if pre_tanh else jnp.tanh(x)  # actions live in [-1, 1]
 
 
 class Critic(nn.Module):

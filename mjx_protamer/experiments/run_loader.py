@@ -1,0 +1,62 @@
+"""The one way to load a saved pretrain run: `eval`, `finetune`, `render` and `reproduce` all call `load_run`.
+
+A run directory holds `config.yaml` and `checkpoints/<step>/`. Whatever is wrong with the path or the
+checkpoint (missing, empty, unfinished, truncated, damaged, written by another config, an absent step)
+becomes a CheckpointError with a one-line message that says what to give instead.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mjx_protamer.errors import CheckpointError
+
+CONFIG_NAME = "config.yaml"
+WHAT = "a pretrain run directory (made by `protamer pretrain --out DIR`), its checkpoints/ or a step in it"
+
+
+def resolve_checkpoint(path: str | Path) -> tuple[Path, Path, int | None]:
+    """(run dir, checkpoints dir, step or None for the latest) from a run dir, its checkpoints dir or a step dir."""
+    path = Path(path)
+    if not path.exists():
+        if path.name.isdigit() and (path.parent.parent / CONFIG_NAME).is_file():
+            steps = ", ".join(p.name for p in sorted(path.parent.iterdir(), key=lambda p: p.name.zfill(12))
+                              if p.name.isdigit()) if path.parent.is_dir() else ""
+            raise CheckpointError(f"checkpoint step {path.name} does not exist in {path.parent}; "
+                                  + (f"the steps there: {steps}" if steps else "it holds no checkpoint"))
+        raise CheckpointError(f"{path}: no such file or directory; give {WHAT}")
+    if (path / CONFIG_NAME).is_file():
+        return path, path / "checkpoints", None
+    if path.name == "checkpoints" and (path.parent / CONFIG_NAME).is_file():
+        return path.parent, path, None
+    if path.name.isdigit() and (path.parent.parent / CONFIG_NAME).is_file():
+        return path.parent.parent, path.parent, int(path.name)
+    raise CheckpointError(f"{path} is not {WHAT} (no {CONFIG_NAME} found)")
+
+
+def load_run(path: str | Path):
+    """(config, env, train state, step) of a saved run; the state is restored onto one device."""
+    import jax
+
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.agents.ddpg.train import make_train
+    from mjx_protamer.config import load_config
+    from mjx_protamer.experiments import checkpoints
+    from mjx_protamer.experiments.env_factory import make_env
+
+    run_dir, ckpt_dir, step = resolve_checkpoint(path)
+    config = load_config(PretrainConfig, run_dir / CONFIG_NAME)
+    steps = checkpoints.available_steps(ckpt_dir)
+    if not steps:
+        raise CheckpointError(f"no checkpoint in {ckpt_dir}: the run stopped before its first one "
+                              f"(one is written every train.checkpoint_every_chunks chunks)")
+    step = steps[-1] if step is None else step
+    env = make_env(config)
+    trainer = make_train(config, env, devices=jax.devices()[:1])
+    like = jax.eval_shape(trainer.init, jax.random.PRNGKey(0))
+    mngr = checkpoints.manager(ckpt_dir)
+    try:
+        state = checkpoints.restore(mngr, step, like)
+    finally:
+        mngr.close()
+    return config, env, state, step

@@ -1,0 +1,86 @@
+"""Feedback channels: how long a person takes to react, speak and be understood, per modality. No JAX.
+
+One place for the numbers that both the simulated teachers (`teachers.py`: when a feedback arrives) and
+credit assignment (`credit.py`, scheme "channel": which steps a feedback is about) use, so the learner
+credits a feedback over the delay distribution of the channel it came through.
+
+A feedback about the step shown at time t starts (key press onset, utterance onset) at t + reaction delay,
+delay ~ max(delay_min_s, Normal(delay_mean_s, delay_std_s)); an utterance lasts duration_s; the pipeline
+(VAD end-of-speech, transcription or scoring) adds latency_s before the event reaches the learner's queue.
+
+Sources of the presets:
+- keyboard: simple visual reaction time to a judged event, 0.35 +- 0.1 s (human reaction-time literature;
+  Deep TAMER's own analysis puts most key presses 0.2-1 s after the event); no utterance, no pipeline.
+- prosody, speech: reaction to onset of speech is slower than a key press (0.6 / 0.8 s); utterance length and
+  pipeline latency are the medians measured on our voice front end (`protamer validate-voice --json` on
+  synthesised speech, docs/results/voice_channels.json) where that file exists, else the values below.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Literal
+
+from mjx_protamer.config import check
+
+KINDS = ("keyboard", "prosody", "speech")
+
+PRESETS = {
+    # reaction delay mean/std/min (s), utterance duration (s), processing latency (s)
+    "keyboard": dict(delay_mean_s=0.35, delay_std_s=0.1, delay_min_s=0.15, duration_s=0.0, latency_s=0.0),
+    "prosody": dict(delay_mean_s=0.6, delay_std_s=0.2, delay_min_s=0.25, duration_s=0.8, latency_s=0.3),
+    "speech": dict(delay_mean_s=0.8, delay_std_s=0.25, delay_min_s=0.3, duration_s=1.0, latency_s=1.2),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class ChannelConfig:
+    kind: Literal["keyboard", "prosody", "speech"] = "keyboard"
+    delay_mean_s: float | None = None  # None: the kind's preset
+    delay_std_s: float | None = None
+    delay_min_s: float | None = None
+    duration_s: float | None = None  # key press 0; an utterance's length (t_end - t_start)
+    latency_s: float | None = None  # processing after t_end before the event reaches the queue
+    gain: float = 2.0  # prosody: value = tanh(gain * score + noise)
+    noise_std: float = 0.5  # prosody
+    # speech: P(recognised | intended), rows intended (+1, 0, -1), columns recognised (+1, 0, -1)
+    confusion: tuple[float, ...] = (0.85, 0.10, 0.05, 0.10, 0.80, 0.10, 0.05, 0.10, 0.85)
+
+    def validate(self) -> None:
+        check(len(self.confusion) == 9, "confusion", f"needs 9 entries (3x3), got {len(self.confusion)}")
+        for r in range(3):
+            row = self.confusion[3 * r:3 * r + 3]
+            check(min(row) >= 0 and abs(sum(row) - 1.0) < 1e-6, "confusion", f"row {r} must be a distribution, got {row}")
+        check(self.noise_std >= 0, "noise_std", f"must be >= 0, got {self.noise_std}")
+        for name in ("delay_mean_s", "delay_std_s", "delay_min_s", "duration_s", "latency_s"):
+            v = getattr(self, name)
+            check(v is None or v >= 0, name, f"must be >= 0, got {v}")
+
+    def get(self, name: str) -> float:
+        v = getattr(self, name)
+        return float(PRESETS[self.kind][name] if v is None else v)
+
+    @property
+    def arrival_offset_s(self) -> float:
+        """Time from the onset of a feedback (its t_start) to its arrival at the learner."""
+        return self.get("duration_s") + self.get("latency_s")
+
+
+def delay_cdf(x: float, channel: ChannelConfig) -> float:
+    """P(reaction delay <= x) for delay = max(delay_min_s, Normal(delay_mean_s, delay_std_s))."""
+    lo, mean, std = channel.get("delay_min_s"), channel.get("delay_mean_s"), channel.get("delay_std_s")
+    if x < lo - 1e-9:  # (step boundaries often fall exactly on the fastest reaction)
+        return 0.0
+    if std == 0:
+        return 1.0 if x >= max(mean, lo) else 0.0
+    return 0.5 * (1.0 + math.erf((x - mean) / (std * math.sqrt(2.0))))
+
+
+def delay_quantile_span(channel: ChannelConfig, mass: float = 0.999) -> tuple[float, float]:
+    """(earliest, latest) reaction delay holding `mass` of the distribution (for window lengths)."""
+    mean, std, lo = channel.get("delay_mean_s"), channel.get("delay_std_s"), channel.get("delay_min_s")
+    z = 3.3 if mass >= 0.999 else 2.6
+    return max(lo, mean - z * std), max(lo, mean + z * std)
