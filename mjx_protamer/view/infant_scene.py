@@ -34,7 +34,7 @@ class InfantScene:
         self.renderer = mujoco.Renderer(self.m, height, width)
         self.camera = mujoco.MjvCamera()
         self.camera.lookat[:] = (0.17, 0.0, 0.05)
-        self.camera.distance = 0.78
+        self.camera.distance = 0.9
         self.camera.azimuth = 0.0  # from beyond the feet, head at the top of the picture
         self.camera.elevation = -58.0
         self.geom_region = np.asarray(self.model.sensing.geom_region)
