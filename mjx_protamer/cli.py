@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "mjx_protamer.commands.train",
     "mjx_protamer.commands.feedback",
     "mjx_protamer.commands.reproduce",
+    "mjx_protamer.commands.render",
 )
 
 

@@ -20,6 +20,18 @@ Each chunk prints a status line; each key press is confirmed at once and each dr
 what it credited. On exit (q, --seconds, --max-chunks, Ctrl-C) everything is saved into --out:
 DDPG: checkpoints/ + config.yaml (loadable by `protamer eval --checkpoint OUT` and by finetune again),
 reward_model.msgpack; COACH: coach_policy.msgpack; both: feedback.jsonl, feedback_config.yaml.
+
+Watching (`--view`): `web` (the default without a display) serves a live page on 127.0.0.1 with a random
+token (printed as `[view] http://127.0.0.1:PORT/?token=...`): the infant at real-time pace, the regions
+touched now, the last feedback and what it credited, the reward model's prediction, the learner's status,
+and + / - / 0 buttons that feed the same queue as the terminal keys. `window`: MuJoCo's viewer (with a
+display). The view runs in its own process; chunks it cannot keep up with are dropped, never waited for.
+
+Never lost: every --autosave-s seconds (30) the checkpoint, reward model / COACH policy and configs are
+saved atomically; `--resume --out DIR` continues a session. Every session is recorded (session.json,
+session_chunks.jsonl: the checkpoint's hash, seeds, config, every drained event with its chunk);
+`--replay DIR --out NEW` reruns it headless to the same final parameters, bit for bit.
+
 Exit codes: 0 normal end, 130 Ctrl-C / 143 SIGTERM (after saving), 2 a bad argument, checkpoint or terminal,
 the voice front end's codes (3 audio input, 4 audio device, 5 missing weights, 6 calibration) when the audio
 source, weights or calibration are unusable (checked before loading), or, at the end of a session that went on
@@ -34,8 +46,8 @@ import sys
 import time
 from pathlib import Path
 
-LIVE = ("keyboard", "prosody", "whisper")
-FEEDBACK_CHOICES = ("keyboard", "prosody", "whisper", "simulated:keyboard", "simulated:prosody",
+LIVE = ("keyboard", "prosody", "whisper", "web")
+FEEDBACK_CHOICES = ("keyboard", "prosody", "whisper", "web", "simulated:keyboard", "simulated:prosody",
                     "simulated:speech", "none")
 
 
@@ -48,10 +60,12 @@ def register(subparsers) -> None:
         "or Ctrl-C.",
     )
     p.add_argument("--feedback", choices=FEEDBACK_CHOICES, default="keyboard",
-                   help="where feedback comes from (simulated:* for a dry run without a human; none: no feedback)")
+                   help="where feedback comes from (web: the live page's buttons and keys only, no terminal needed; "
+                   "simulated:* for a dry run without a human; none: no feedback)")
     p.add_argument("--learner", choices=("ddpg", "coach"), default="ddpg",
                    help="ddpg: the checkpoint's DDPG + DeepTAMER reward model; coach: Deep COACH on the same env")
-    p.add_argument("--checkpoint", type=Path, required=True, help="a pretrain run directory or checkpoint in it")
+    p.add_argument("--checkpoint", type=Path, default=None,
+                   help="a pretrain run directory or checkpoint in it (not with --resume / --replay)")
     p.add_argument("--config", type=Path, default=None, help="feedback YAML (configs/feedback_keyboard.yaml); "
                    "its pretrain section is replaced by the checkpoint's")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -62,6 +76,16 @@ def register(subparsers) -> None:
     p.add_argument("--max-chunks", type=int, default=0, help="stop after this many chunks (0: no limit)")
     p.add_argument("--no-pace", action="store_true",
                    help="do not pace live chunks to real time (they are shown as fast as they are computed)")
+    w = p.add_argument_group("watching, autosave, resume and replay")
+    w.add_argument("--view", choices=("web", "window", "none"), default=None,
+                   help="web: a live page on 127.0.0.1 (default without a display); window: MuJoCo's viewer "
+                   "(default with a display); none")
+    w.add_argument("--port", type=int, default=0, help="--view web: the port (default: a free one)")
+    w.add_argument("--autosave-s", type=float, default=30.0,
+                   help="save checkpoint, reward model and configs atomically this often (s; 0: only at exit)")
+    w.add_argument("--resume", action="store_true", help="continue the session in --out (after a crash or stop)")
+    w.add_argument("--replay", type=Path, default=None, metavar="SESSION_DIR",
+                   help="rerun a recorded session headless into --out, reaching the same final parameters")
     v = p.add_argument_group("voice (--feedback prosody|whisper)")
     v.add_argument("--listen-source", default="mic", metavar="mic|wav:PATH",
                    help="the microphone (default) or a WAV file played at real-time pace (the run ends with it)")
@@ -137,7 +161,24 @@ def _finetune(args: argparse.Namespace) -> int:
         raise ConfigError("--chunk-ms must be > 0")
     if args.coach_delay_s < 0:
         raise ConfigError("--coach-delay-s must be >= 0")
+    if args.autosave_s < 0:
+        raise ConfigError("--autosave-s must be >= 0")
+    if not 0 <= args.port <= 65535:
+        raise ConfigError(f"--port must be in 0..65535, got {args.port}")
+    if args.replay is not None:
+        from mjx_protamer.commands.finetune_replay import replay
+        return replay(args)
+    if args.resume:
+        problem = _resume_problem(args)
+        if problem:
+            return _fail(problem)
+        args.checkpoint = _resume_source(args)
+    elif args.checkpoint is None:
+        return _fail("--checkpoint is required (a pretrain run directory), unless --resume or --replay")
     live = args.feedback in LIVE
+    from mjx_protamer.commands.finetune_view import default_view
+    if args.feedback == "web" and (args.view or default_view()) != "web":
+        return _fail("--feedback web takes feedback from the live page: it needs --view web")
     # Fail fast, before the minutes of loading and compiling, on what a live user can get wrong.
     if args.feedback == "keyboard" and not sys.stdin.isatty():
         return _fail("--feedback keyboard reads keys from the terminal, but stdin is not a terminal (tty). "
@@ -169,6 +210,9 @@ def _finetune(args: argparse.Namespace) -> int:
     except CheckpointError as e:
         return _fail(f"--checkpoint: {e} (expected DIR/config.yaml and DIR/checkpoints/<step>/)")
 
+    from mjx_protamer.commands.train import _enable_compile_cache
+
+    _enable_compile_cache()  # the next session on this checkpoint starts in seconds
     print(f"[finetune] loading {ckpt} (the first chunk compiles: this can take a minute or two)", flush=True)
     try:
         loaded = _load(args, ckpt)
@@ -202,72 +246,170 @@ def _with_feedback_channel(fb, feedback: str):
     return fb if kind is None else dataclasses.replace(fb, teacher=with_channel(fb.teacher, kind))
 
 
-def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
+# --------------------------------------------------------------------------- resume
+
+def _resume_problem(args) -> str | None:
+    from mjx_protamer.human.session_record import MANIFEST
+
+    if args.out is None:
+        return "--resume needs --out, the directory of the session to continue"
+    if not (args.out / MANIFEST).is_file():
+        return f"--resume: {args.out} holds no finetune session ({MANIFEST} is missing)"
+    if args.checkpoint is not None:
+        return "--resume continues from the session's own autosave: leave out --checkpoint"
+    return None
+
+
+def _resume_source(args) -> Path:
+    """What a resumed session loads: its own autosaved checkpoint (DDPG) or the checkpoint it started
+    from (COACH, whose policy is in coach_policy.msgpack)."""
+    import json
+
+    from mjx_protamer.human.session_record import MANIFEST
+
+    manifest = json.loads((args.out / MANIFEST).read_text())
+    if manifest["learner"] != args.learner:
+        from mjx_protamer.config import ConfigError
+        raise ConfigError(f"--resume: the session in {args.out} used --learner {manifest['learner']}")
+    if args.learner == "coach":
+        if (args.out / "coach_policy.msgpack").is_file():
+            args.coach_policy = args.out / "coach_policy.msgpack"
+        return Path(manifest["checkpoint"])
+    if not (args.out / "checkpoints").is_dir():
+        from mjx_protamer.config import ConfigError
+        raise ConfigError(f"--resume: {args.out} has no autosaved checkpoint yet (it stopped before the first "
+                          f"autosave); start a new session")
+    return args.out
+
+
+# --------------------------------------------------------------------------- the run
+
+def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, feedback_mode, queue=None):
+    """The learner of a session (TamerRun or CoachRun) on the loaded checkpoint; `feedback_mode` is what
+    the run is told (None, "queue" or "simulated:KIND"). Returns (run, saved_config)."""
     import dataclasses
 
-    from mjx_protamer.human.tamer_loop import load_feedback_config
-
-    fb = load_feedback_config(args.config, args.overrides).feedback
-    fb = _with_feedback_channel(fb, args.feedback)
-    chunk_steps = max(1, round(args.chunk_ms / 1000.0 / fb.dt))
-    out = args.out or Path("runs") / time.strftime("finetune-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    # A live run's events are stamped on the wall clock; the queue validates against it too.
-    sim = None if live or args.feedback == "none" else args.feedback
     if args.learner == "coach":
-        from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
         from mjx_protamer.agents.coach import CoachConfig
+        from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
 
         ccfg = CoachRunConfig(coach=CoachConfig(human_delay_steps=round(args.coach_delay_s / fb.dt)),
                               chunk_steps=chunk_steps, episode_length=pre.train.episode_length, dt=fb.dt,
                               queue_size=fb.queue_size, min_interval_steps=fb.credit.min_interval_steps,
                               seed=fb.seed)
-        run = CoachRun(ccfg, env, feedback=sim, log_path=out / "feedback.jsonl", teacher=fb.teacher)
+        run = CoachRun(ccfg, env, feedback=None if feedback_mode in (None, "queue") else feedback_mode,
+                       queue=queue, log_path=out / "feedback.jsonl", teacher=fb.teacher)
         if args.coach_policy is not None:
             run.load_policy(args.coach_policy)
-        saved_config = {"coach": dataclasses.asdict(ccfg), "pretrain_run": str(args.checkpoint)}
-    else:
-        from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
+        return run, {"coach": dataclasses.asdict(ccfg), "pretrain_run": str(args.checkpoint)}
+    from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
 
-        train = dataclasses.replace(pre.train, num_envs=1, chunk_steps=chunk_steps, warmup_env_steps=0,
-                                    total_env_steps=max(pre.train.total_env_steps, chunk_steps), num_devices=1)
-        ddpg = dataclasses.replace(pre.ddpg, replay_size=max(pre.ddpg.batch_size, 20_000, chunk_steps))
-        config = FeedbackRunConfig(pretrain=dataclasses.replace(pre, train=train, ddpg=ddpg),
-                                   feedback=dataclasses.replace(fb, watch_env=0))
-        run = TamerRun(config, env, feedback=None if args.feedback == "none" else ("queue" if live else sim),
-                       log_path=out / "feedback.jsonl")
-        # The pretrained learner on a fresh single-env state (env batch, noise and replay are new).
+    train = dataclasses.replace(pre.train, num_envs=1, chunk_steps=chunk_steps, warmup_env_steps=0,
+                                total_env_steps=max(pre.train.total_env_steps, chunk_steps), num_devices=1)
+    ddpg = dataclasses.replace(pre.ddpg, replay_size=max(pre.ddpg.batch_size, 20_000, chunk_steps))
+    config = FeedbackRunConfig(pretrain=dataclasses.replace(pre, train=train, ddpg=ddpg),
+                               feedback=dataclasses.replace(fb, watch_env=0))
+    run = TamerRun(config, env, feedback=feedback_mode, queue=queue, log_path=out / "feedback.jsonl")
+    if args.resume:  # the session's own single-env state: learner, env, replay, noise
+        run.state = loaded
+        if (out / "reward_model.msgpack").is_file():
+            run.model.load(out / "reward_model.msgpack")
+    else:  # the pretrained learner on a fresh single-env state (env batch, noise and replay are new)
         run.state = run.state.replace(**{k: getattr(loaded, k) for k in (
             "actor_params", "critic_params", "target_actor_params", "target_critic_params",
             "actor_opt_state", "critic_opt_state")})
-        run.commit_state()  # restored arrays are uncommitted: the second chunk would compile again
-        saved_config = None
-    if run.log is not None:
-        run.log.note(event="start", feedback=args.feedback, learner=args.learner, checkpoint=str(args.checkpoint),
-                     checkpoint_step=int(step), chunk_steps=chunk_steps, dt=fb.dt)
+    run.commit_state()  # restored arrays are uncommitted: the second chunk would compile again
+    return run, None
 
-    keys = listener = stop_event = None
+
+def _checkpoint_identity(ckpt: Path, step: int) -> dict:
+    """The checkpoint a session starts from: its step directory and the SHA-256 of its files."""
+    from mjx_protamer.experiments.run_loader import resolve_checkpoint
+    from mjx_protamer.human.session_record import tree_sha256
+
+    run_dir, ckpt_dir, _ = resolve_checkpoint(ckpt)
+    step_dir = next(p for p in ckpt_dir.iterdir() if p.is_dir() and p.name.isdigit() and int(p.name) == step)
+    return {"checkpoint": str(run_dir.absolute()), "checkpoint_step_dir": str(step_dir.absolute()),
+            "checkpoint_step": int(step), "checkpoint_sha256": tree_sha256(step_dir),
+            "checkpoint_config_sha256": tree_sha256(run_dir / "config.yaml")}
+
+
+def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
+    from mjx_protamer.config import to_dict
+    from mjx_protamer.human.session_record import MANIFEST, SessionRecorder, write_json_atomic
+    from mjx_protamer.human.tamer_loop import load_feedback_config
+
+    resume = args.resume
+    if resume:  # the session's own configs, whatever the flags say
+        import json
+
+        manifest = json.loads((args.out / MANIFEST).read_text())
+        overrides, config_path = manifest["overrides"], manifest["config"]
+        chunk_ms = manifest["chunk_ms"]
+    else:
+        overrides, config_path, chunk_ms = args.overrides, args.config, args.chunk_ms
+    fb = _with_feedback_channel(load_feedback_config(config_path, overrides).feedback, args.feedback)
+    chunk_steps = max(1, round(chunk_ms / 1000.0 / fb.dt))
+    out = args.out or Path("runs") / time.strftime("finetune-%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    # A live run's events are stamped on the wall clock; the queue validates against it too.
+    sim = None if live or args.feedback == "none" else args.feedback
+    mode = None if args.feedback == "none" else ("queue" if live else sim)
+    if args.learner == "coach":
+        mode = sim
+    run, saved_config = _build_run(args, pre, env, loaded, step, fb, chunk_steps, out, mode)
+    if resume:
+        manifest.setdefault("resumed", []).append({"at_step": int(step), "time": time.time()})
+        run.first_step = int(step) if args.learner == "ddpg" else _coach_resume_step(out)
+    else:
+        manifest = {"version": 1, "learner": args.learner, "feedback": args.feedback, "chunk_ms": chunk_ms,
+                    "chunk_steps": chunk_steps, "config": str(args.config) if args.config else None,
+                    "overrides": list(args.overrides), "coach_delay_s": args.coach_delay_s,
+                    "coach_policy": str(args.coach_policy) if args.coach_policy else None,
+                    "seeds": {"train": pre.train.seed, "feedback": fb.seed},
+                    "feedback_config": to_dict(fb), "listen_source": args.listen_source,
+                    "segments": str(args.save_segments or (out / "segments")) if voice is not None else None,
+                    "started": time.time(), **_checkpoint_identity(Path(args.checkpoint), step)}
+    recorder = SessionRecorder(out)
+    write_json_atomic(out / MANIFEST, manifest)
+    if run.log is not None:
+        run.log.note(event="resume" if resume else "start", feedback=args.feedback, learner=args.learner,
+                     checkpoint=str(args.checkpoint), checkpoint_step=int(step), chunk_steps=chunk_steps, dt=fb.dt)
+
+    from mjx_protamer.commands.finetune_view import default_view, last_event as _last_event, snapshot, start_view
+
+    view_kind = args.view or default_view()
+    keys = listener = stop_event = view = None
     listener_said = wav_over = listener_died = False
     interrupted = False
+    last_event = None
     with _Stopper() as stopper:
         try:
             print(f"[finetune] {args.learner} from {args.checkpoint} (step {step}); chunks of {chunk_steps} steps "
-                  f"({chunk_steps * fb.dt * 1000:.0f} ms); feedback {args.feedback}; output {out}", flush=True)
+                  f"({chunk_steps * fb.dt * 1000:.0f} ms); feedback {args.feedback}; output {out}"
+                  + (f"; resumed at step {run.first_step}" if resume else ""), flush=True)
             _warm_up(run, args.learner)
             t_end = time.time() + args.seconds if args.seconds > 0 else float("inf")
             chunks = 0
             slow_said = False
+            last_save = time.time()
             while time.time() < t_end and stopper.signum is None and not (keys and keys.stop_requested.is_set()):
                 if args.max_chunks and chunks >= args.max_chunks:
                     break
                 t0 = time.time()
                 m = run.step_chunk(t0=t0 if live else None)
                 chunks += 1
+                c = run.last_chunk
+                recorder.chunk(chunks - 1, c["first_step"], c["t0"], [o[0] for o in run.outcomes])
+                last_event = _last_event(run, args.learner) or last_event
+                if view is not None:
+                    view.offer(snapshot(run, args, m, t0, fb.dt, last_event))
                 _print_chunk(run, m, args.learner)
                 _print_outcomes(run, args.learner)
-                if chunks == 1:  # compiled and running: now the feedback sources start
+                if chunks == 1:  # compiled and running: now the feedback sources and the view start
                     if stopper.signum is not None:
                         break
+                    view = start_view(view_kind, pre, run, args.port)
                     if args.feedback == "keyboard":
                         from mjx_protamer.human.keyboard import KeyboardFeedback
                         keys = KeyboardFeedback(run.queue).start()
@@ -285,8 +427,14 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                         print(f"[finetune] voice listener ({args.feedback}, {args.listen_source}) started, pid "
                               f"{listener.pid}; its lines start with [voice]", flush=True)
                     if live:
-                        print("[finetune] ready: give feedback now" + (" (+ good, - bad, 0 neutral, q quit)"
-                              if keys is not None else " (speak)"), flush=True)
+                        how = (" (+ good, - bad, 0 neutral, q quit)" if keys is not None else
+                               " (the page's + / - / 0)" if args.feedback == "web" else " (speak)")
+                        print("[finetune] ready: give feedback now" + how, flush=True)
+                if args.autosave_s > 0 and time.time() - last_save >= args.autosave_s:
+                    t_save = time.time()
+                    _save(run, out, args.learner, saved_config, final=False)
+                    last_save = time.time()
+                    print(f"[finetune] autosaved at step {run.first_step} ({last_save - t_save:.1f} s)", flush=True)
                 if listener is not None and not listener_said:
                     from audio_frontend.listen import listener_status
                     said = listener_status(listener)
@@ -333,7 +481,12 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     listener.join(2.0)
             # whatever arrived last
             run.process_events(step=max(0, run.first_step - 1))
+            recorder.final([o[0] for o in run.outcomes])
+            recorder.close()
             _print_outcomes(run, args.learner)
+            if view is not None:
+                view.close()
+                print(f"[view] closed: {view.offered} chunks offered, {view.dropped} dropped", flush=True)
             _save(run, out, args.learner, saved_config)
             print(f"[finetune] saved {'coach policy' if args.learner == 'coach' else 'checkpoint, reward model'} "
                   f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
@@ -344,6 +497,13 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
               f"(see above); everything up to then is saved", flush=True)
         return max(listener.exitcode, 1)
     return 130 if interrupted else 0
+
+
+def _coach_resume_step(out: Path) -> int:
+    import json
+
+    p = out / "coach_progress.json"
+    return int(json.loads(p.read_text())["step"]) if p.is_file() else 0
 
 
 def _warm_up(run, learner: str) -> None:
@@ -378,43 +538,52 @@ def _print_chunk(run, m, learner: str) -> None:
 
 
 def _print_outcomes(run, learner: str) -> None:
+    from mjx_protamer.commands.feedback_text import outcome_text
+
     for event, got, why in run.outcomes:
         label = event.details.get("transcript") or event.details.get("key") or ""
         head = f"[event] {event.source} {event.value:+.2f}" + (f" ({label!r})" if label else "")
-        if why is not None:
-            print(f"{head}: accepted, not used: {why}", flush=True)
-        elif learner == "coach":
-            c = run.learner.config
-            end = got - c.human_delay_steps
-            print(f"{head}: accepted, corrects steps {end - c.window + 1}..{end} (the window "
-                  f"{c.human_delay_steps} steps before step {got})", flush=True)
-        else:
-            print(f"{head}: accepted, credited steps {min(got.steps)}..{max(got.steps)} (lands on step {got.step})",
-                  flush=True)
+        print(f"{head}: {outcome_text(run, got, why, learner)}", flush=True)
     run.outcomes = []
 
 
-def _save(run, out: Path, learner: str, saved_config) -> None:
+def _atomic_write(path: Path, write) -> None:
+    """`write(tmp_path)`, then rename onto `path`: a kill mid-save leaves the previous file whole."""
+    import os
+
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    write(tmp)
+    os.replace(tmp, path)
+
+
+def _save(run, out: Path, learner: str, saved_config, final: bool = True) -> None:
+    """Save what a session has learnt, each file atomically (autosave: final=False keeps the run open)."""
     import yaml
 
     from mjx_protamer.config import to_dict
+    from mjx_protamer.human.session_record import write_json_atomic
+
+    def text(s: str):
+        return lambda p: p.write_text(s)
 
     if learner == "coach":
-        run.save_policy(out / "coach_policy.msgpack")
-        (out / "feedback_config.yaml").write_text(yaml.safe_dump(_plain(saved_config), sort_keys=False))
+        _atomic_write(out / "coach_policy.msgpack", run.save_policy)
+        _atomic_write(out / "feedback_config.yaml", text(yaml.safe_dump(_plain(saved_config), sort_keys=False)))
+        write_json_atomic(out / "coach_progress.json", {"step": int(run.first_step), "events": int(run.events)})
     else:
         import jax
 
         from mjx_protamer.experiments import checkpoints
 
         mngr = checkpoints.manager(out / "checkpoints")
-        checkpoints.save(mngr, run.first_step, jax.device_get(run.state))
-        if hasattr(mngr, "wait_until_finished"):
-            mngr.wait_until_finished()
-        run.model.save(out / "reward_model.msgpack")
-        (out / "config.yaml").write_text(yaml.safe_dump(to_dict(run.config.pretrain), sort_keys=False))
-        (out / "feedback_config.yaml").write_text(yaml.safe_dump(to_dict(run.config.feedback), sort_keys=False))
-    run.close()
+        if mngr.latest_step() != run.first_step:  # (an autosave may have saved this very step)
+            checkpoints.save(mngr, run.first_step, jax.device_get(run.state))  # orbax: atomic rename
+        _atomic_write(out / "reward_model.msgpack", run.model.save)
+        _atomic_write(out / "config.yaml", text(yaml.safe_dump(to_dict(run.config.pretrain), sort_keys=False)))
+        _atomic_write(out / "feedback_config.yaml",
+                      text(yaml.safe_dump(to_dict(run.config.feedback), sort_keys=False)))
+    if final:
+        run.close()
 
 
 def _plain(x):

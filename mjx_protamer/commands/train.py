@@ -44,6 +44,9 @@ def register(subparsers) -> None:
     e.add_argument("--episodes", type=int, default=10)
     e.add_argument("--seed", type=int, default=None, help="test-episode seed (default: the run's eval seed)")
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    e.add_argument("--body-map", default=None, metavar="FILE.png|none",
+                   help="self-touch runs: write a body map (the infant coloured by how often each region was "
+                   "touched) there (default: RUN/body_map.png; 'none' to skip)")
     e.set_defaults(handler=_eval)
 
 
@@ -142,6 +145,8 @@ def _eval(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ConfigError(f"--episodes must be >= 1, got {args.episodes}")
+    if (args.body_map or "").lower() != "none":
+        _prepare_body_map_gl(args.checkpoint)
     _enable_compile_cache()
     from mjx_protamer.experiments import metrics
     from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
@@ -152,9 +157,44 @@ def _eval(args: argparse.Namespace) -> int:
         seed = eval_seed(config) if args.seed is None else args.seed
         summary = evaluate(config, env, state.actor_params, args.episodes, seed)
     summary["checkpoint_step"] = step
+    body_map = _body_map(args, config, summary)
+    if body_map is not None:
+        summary["body_map"] = str(body_map)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
         print(f"checkpoint step {step}, {summary['episodes']} test episodes, mean return {summary['episode_return']:.2f}")
         print(metrics.format_table(summary, metrics.PAPER_DDPG))
+        if body_map is not None:
+            print(f"body map: {body_map}")
     return 0
+
+
+def _prepare_body_map_gl(checkpoint) -> None:
+    """Pick the OpenGL backend before JAX starts (a missing checkpoint or OpenGL is reported later)."""
+    from mjx_protamer.view.gl import GLUnavailable
+    from mjx_protamer.view.scenes import prepare_gl_for
+
+    try:
+        prepare_gl_for(checkpoint)
+    except (GLUnavailable, FileNotFoundError, OSError, ValueError):  # ValueError: CheckpointError
+        pass
+
+
+def _body_map(args, config, summary):
+    """The eval's body map (view.bodymap), or None: a toy run, --body-map none, or no offscreen OpenGL
+    (then a note on stderr: the metrics still count)."""
+    if config.env_name == "toy" or (args.body_map or "").lower() == "none":
+        return None
+    from mjx_protamer.experiments.run_loader import resolve_checkpoint
+    from mjx_protamer.view.bodymap import write_body_map
+    from mjx_protamer.view.gl import GLUnavailable
+
+    path = Path(args.body_map) if args.body_map else resolve_checkpoint(args.checkpoint)[0] / "body_map.png"
+    try:
+        return write_body_map(summary["region_touch_frequency"], path,
+                              f"{summary['episodes']} test episodes, checkpoint step {summary['checkpoint_step']}",
+                              config.env)
+    except (GLUnavailable, OSError, ImportError) as e:
+        print(f"note: no body map: {e}", file=sys.stderr)
+        return None

@@ -45,6 +45,9 @@ def summarize(self_contact, region_mask, arm_speed, freeze_threshold: float = FR
     ]
     out: dict = {name: float(np.mean([p[name] for p in per])) for name in METRIC_NAMES}
     out["episodes"] = len(per)
+    # where the touches go (body maps): the fraction of all test steps each region was touched
+    out["region_touch_frequency"] = [float(v) for v in (np.asarray(region_mask) > 0).reshape(
+        -1, np.asarray(region_mask).shape[-1]).mean(axis=0)]
     out["per_episode"] = {name: [p[name] for p in per] for name in METRIC_NAMES}
     return out
 

@@ -155,6 +155,8 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
     (out / "table2.md").write_text(format_markdown(summary))
     fig1 = plot_training(training, cfg, out / "figure1_training_reward.png")
     fig2 = plot_regions(summary, out / "figure2_unique_regions.png")
+    from mjx_protamer.view.bodymap import write_condition_body_maps  # body_map_<condition>.png
+    write_condition_body_maps(pre, evals, out)
     return {"out_dir": str(out), "table_md": str(out / "table2.md"), "table_json": str(out / "table2.json"),
             "figure1": str(fig1), "figure2": str(fig2), "training_csv": str(out / "training.csv"),
             "wall_s": total_s, "summary": summary}

@@ -98,6 +98,7 @@ class CoachRun:
         self.corrections = 0
         self.last_step_used: int | None = None
         self.outcomes: list[tuple] = []  # (event, step or None, reason or None) of the last drain
+        self.last_chunk: dict | None = None  # the steps of the last chunk (step_chunk), as TamerRun
 
     def _commit(self) -> None:
         """Committed arrays everywhere (see TamerRun.commit_state): one compile of rollout and update."""
@@ -123,6 +124,7 @@ class CoachRun:
         if isinstance(self.clock, VirtualClock):
             self.clock.set(t0 + n * cfg.dt)
         self.learner.record(first, out["obs"], out["action"], out["logp"])
+        self.last_chunk = {"first_step": first, "t0": t0, "obs": out["obs"], "action": out["action"]}
         if self.teacher is not None:
             sig = signal_matrix(self.teacher.config.signals, tuple(self.env.reward_term_names),
                                 out["reward_terms"], obs=out["obs"], action=out["action"])

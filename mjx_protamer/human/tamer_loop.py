@@ -117,6 +117,7 @@ class TamerRun:
         self.events = 0
         self.human_params = self.model.params if self.use_model else None
         self.outcomes: list[tuple] = []  # (event, Credit or None, reason or None) of the last drain
+        self.last_chunk: dict | None = None  # the watched env's steps of the last chunk (step_chunk)
 
     def commit_state(self) -> None:
         """Put the train state (and reward-model params) on the device as committed arrays. Arrays made
@@ -151,6 +152,8 @@ class TamerRun:
         if isinstance(self.clock, VirtualClock):
             self.clock.set(t0 + n * fc.dt)
         self.history.record(first, rows["obs"], rows["action"])
+        # what a live view draws and a session record keeps: the watched env's steps and their times
+        self.last_chunk = {"first_step": first, "t0": t0, "obs": rows["obs"], "action": rows["action"]}
         if self.teacher is not None:
             sig = signal_matrix(self.teacher.config.signals, tuple(self.env.reward_term_names),
                                 rows["reward_terms"], obs=rows["obs"], action=rows["action"])

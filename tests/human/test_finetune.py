@@ -29,17 +29,7 @@ def protamer(*argv) -> list[str]:
     return [sys.executable, "-m", "mjx_protamer.cli", *map(str, argv)]
 
 
-@pytest.fixture(scope="module")
-def toy_run(tmp_path_factory):
-    """A tiny toy-env pretrain run (about 25 s)."""
-    out = tmp_path_factory.mktemp("toy") / "pt"
-    subprocess.run(protamer("pretrain", "--out", out, "--no-progress", "--set", "env_name=toy",
-                            "--set", "ddpg.actor_hidden=[16]", "--set", "ddpg.critic_hidden=[16,16]",
-                            "--set", "train.num_envs=4", "--set", "train.episode_length=50",
-                            "--set", "train.total_env_steps=1200", "--set", "train.warmup_env_steps=400",
-                            "--set", "train.chunk_steps=100"),
-                   check=True, capture_output=True, env=ENV, cwd=ROOT, timeout=300)
-    return out
+# toy_run: the shared tiny toy pretrain run (tests/conftest.py)
 
 
 def _controlling_terminal():
@@ -135,8 +125,10 @@ def test_keyboard_thread_reads_single_keys_from_a_pty_and_restores_the_terminal(
 # ---------------------------------------------------------------- errors a live user can hit (fast)
 
 def run_main(*argv) -> int:
+    """`protamer finetune ARGS` in-process (without the live view unless ARGS ask for one)."""
     from mjx_protamer.cli import main
-    return main(["finetune", *map(str, argv)])
+    argv = [*map(str, argv)]
+    return main(["finetune", *argv, *([] if "--view" in argv else ["--view", "none"])])
 
 
 def test_missing_checkpoint_is_a_clear_error(tmp_path, capsys):
@@ -203,6 +195,7 @@ def test_finetune_keyboard_in_a_terminal_confirms_credits_saves_and_loads(toy_ru
     text = p.text
     assert "[feedback] +1 accepted" in text and "[feedback] -1 accepted" in text and "credited steps" in text
     assert "saved checkpoint, reward model and feedback log" in text
+    assert "[view] http://127.0.0.1:" in text and "?token=" in text  # the default view without a display
     accepted = FeedbackLog.read(out / "feedback.jsonl")
     assert [e.value for e in accepted] == [1.0, -1.0] and all(e.source == "keyboard" for e in accepted)
     assert reward_model_changed(out)
@@ -214,7 +207,7 @@ def test_finetune_keyboard_in_a_terminal_confirms_credits_saves_and_loads(toy_ru
 @pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
 def test_finetune_ctrl_c_mid_run_saves_and_exits_130(toy_run, tmp_path):
     out = tmp_path / "ft"
-    p = PtyProc(protamer("finetune", "--feedback", "keyboard", "--checkpoint", toy_run, "--out", out))
+    p = PtyProc(protamer("finetune", "--feedback", "keyboard", "--checkpoint", toy_run, "--out", out, "--view", "none"))
     p.read_until("ready: give feedback now")
     p.send("+")
     p.read_until("[event] keyboard +1.00")
@@ -298,7 +291,7 @@ def _speech_wav(path: Path) -> Path:
 
 
 def _finetune_voice(toy_run, out: Path, *extra, timeout=300) -> subprocess.CompletedProcess:
-    p = subprocess.run(protamer("finetune", "--checkpoint", toy_run, "--out", out, *extra),
+    p = subprocess.run(protamer("finetune", "--checkpoint", toy_run, "--out", out, "--view", "none", *extra),
                        capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=timeout)
     return p
 
@@ -321,6 +314,15 @@ def test_finetune_whisper_from_a_wav_of_espeak_speech(toy_run, tmp_path):
     assert text.count("accepted, credited steps") == 2
     assert reward_model_changed(out)
     assert len(list((out / "segments").glob("*.wav"))) == 2  # the scored utterances, for replay
+    # the voice session replays without a human or a microphone: the same reward model, bit for bit
+    from mjx_protamer.human.session_record import read_session
+    manifest, _ = read_session(out)
+    assert Path(manifest["segments"]) == out / "segments"
+    assert run_main("--replay", out, "--out", tmp_path / "again") == 0
+    r1, r2 = _reward_model_params(out / "reward_model.msgpack"), _reward_model_params(tmp_path / "again" / "reward_model.msgpack")
+    assert r1["updates"] == r2["updates"] > 0 and _leaves_equal(r1["params"], r2["params"])
+    from mjx_protamer.experiments.evaluate import load_run
+    assert _leaves_equal(load_run(out)[2].actor_params, load_run(tmp_path / "again")[2].actor_params)
 
 
 def _tiny_prosody_model(path: Path) -> str:
@@ -393,3 +395,114 @@ def test_finetune_with_a_simulated_teacher_uses_its_events(toy_run, tmp_path, ca
     assert text.count("[event] simulated") == len(events)
     used = text.count("accepted, corrects steps") if learner == "coach" else text.count("credited steps")
     assert used > 3
+
+
+# ---------------------------------------------------------------- record and replay, autosave, kill -9, resume
+
+TEACHER = ["--set", "feedback.teacher.rule=[{signal: 'action:0', value: 1.0, above: 0.0}, "
+           "{signal: 'action:0', value: -1.0, below: 0.0}]", "--set", "feedback.teacher.min_gap_steps=10"]
+
+
+def _leaves_equal(a, b) -> bool:
+    import jax
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    return len(la) == len(lb) and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(la, lb))
+
+
+def _reward_model_params(path: Path):
+    from flax import serialization
+    return serialization.msgpack_restore(path.read_bytes())
+
+
+@pytest.mark.parametrize("learner", ["ddpg", "coach"])
+def test_replay_of_a_recorded_session_reaches_the_same_parameters_bit_for_bit(toy_run, tmp_path, capsys, learner):
+    """A session with a simulated teacher is recorded; --replay reruns it headless from the manifest and the
+    chunk log alone (no teacher) and must end at exactly the same parameters."""
+    from mjx_protamer.human.session_record import read_session
+
+    session, again = tmp_path / "session", tmp_path / "replay"
+    assert run_main("--learner", learner, "--feedback", "simulated:keyboard", "--checkpoint", toy_run,
+                    "--out", session, "--max-chunks", "10", *TEACHER) == 0
+    manifest, records = read_session(session)
+    events = sum(len(r["events"]) for r in records)
+    assert events > 5 and manifest["checkpoint_sha256"] and manifest["learner"] == learner
+    assert run_main("--replay", session, "--out", again) == 0
+    assert f"[replay] done: step 500, {events} events" in capsys.readouterr().out
+    if learner == "coach":
+        assert (session / "coach_policy.msgpack").read_bytes() == (again / "coach_policy.msgpack").read_bytes()
+        return
+    from mjx_protamer.experiments.evaluate import load_run
+    _, _, s1, step1 = load_run(session)
+    _, _, s2, step2 = load_run(again)
+    assert step1 == step2 == 500
+    assert _leaves_equal(s1.actor_params, s2.actor_params) and _leaves_equal(s1.critic_params, s2.critic_params)
+    r1, r2 = _reward_model_params(session / "reward_model.msgpack"), _reward_model_params(again / "reward_model.msgpack")
+    assert r1["updates"] == r2["updates"] > 0 and _leaves_equal(r1["params"], r2["params"])
+    # the replayed log holds the same events
+    assert [e.to_json() for e in FeedbackLog.read(session / "feedback.jsonl")] == \
+        [e.to_json() for e in FeedbackLog.read(again / "feedback.jsonl")]
+
+
+def test_replay_refuses_a_changed_checkpoint_and_a_missing_session(toy_run, tmp_path, capsys):
+    import shutil
+
+    ckpt = tmp_path / "ckpt"
+    shutil.copytree(toy_run, ckpt)
+    session = tmp_path / "session"
+    assert run_main("--feedback", "none", "--checkpoint", ckpt, "--out", session, "--max-chunks", "1") == 0
+    step_dir = next((ckpt / "checkpoints").iterdir())
+    victim = next(p for p in step_dir.rglob("*") if p.is_file() and p.stat().st_size > 0)
+    victim.write_bytes(victim.read_bytes()[:-1] + bytes([victim.read_bytes()[-1] ^ 1]))
+    assert run_main("--replay", session, "--out", tmp_path / "r") == 2
+    assert "has changed (SHA-256 differs)" in capsys.readouterr().err
+    assert run_main("--replay", tmp_path / "nothing", "--out", tmp_path / "r2") == 2
+    assert "is not a recorded finetune session" in capsys.readouterr().err
+
+
+def test_kill_9_of_a_session_loses_at_most_the_autosave_interval_and_resume_continues(toy_run, tmp_path):
+    out = tmp_path / "live"
+    p = subprocess.Popen(protamer("finetune", "--feedback", "simulated:keyboard", "--checkpoint", toy_run, "--out", out,
+                                  "--view", "none", "--autosave-s", "1", "--seconds", "300", "--no-pace", *TEACHER),
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=ENV, cwd=ROOT)
+    saved_steps = []
+    try:
+        for line in p.stdout:
+            if line.startswith("[finetune] autosaved at step"):
+                saved_steps.append(int(line.split()[4]))
+                if len(saved_steps) == 3:
+                    break
+        p.kill()  # SIGKILL: no handler, no final save
+        p.wait(30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert len(saved_steps) == 3 and p.returncode == -9
+    from mjx_protamer.experiments import checkpoints
+    from mjx_protamer.experiments.evaluate import load_run
+
+    assert checkpoints.manager(out / "checkpoints").latest_step() >= saved_steps[-1]
+    _, _, state, step = load_run(out)  # whole and loadable
+    assert step >= saved_steps[-1]
+    rm = _reward_model_params(out / "reward_model.msgpack")
+    assert rm["updates"] > 0
+    assert len(FeedbackLog.read(out / "feedback.jsonl")) > 0
+    # --resume continues from the autosave: steps go on from there, the log grows
+    before = len(FeedbackLog.records(out / "feedback.jsonl"))
+    r = subprocess.run(protamer("finetune", "--feedback", "simulated:keyboard", "--resume", "--out", out,
+                                "--view", "none", "--max-chunks", "2"),
+                       capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"resumed at step {step}" in r.stdout and f"[step {step + 100:>7}]" in r.stdout
+    assert len(FeedbackLog.records(out / "feedback.jsonl")) > before
+    assert checkpoints.manager(out / "checkpoints").latest_step() == step + 100
+
+
+def test_resume_and_replay_argument_errors(tmp_path, capsys):
+    assert run_main("--feedback", "none", "--resume") == 2
+    assert "--resume needs --out" in capsys.readouterr().err
+    assert run_main("--feedback", "none", "--resume", "--out", tmp_path) == 2
+    assert "holds no finetune session" in capsys.readouterr().err
+    assert run_main("--feedback", "none") == 2
+    assert "--checkpoint is required" in capsys.readouterr().err
+    assert run_main("--feedback", "web", "--view", "none", "--checkpoint", tmp_path) == 2
+    assert "it needs --view web" in capsys.readouterr().err

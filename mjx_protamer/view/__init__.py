@@ -1,0 +1,4 @@
+"""Seeing the infant: offscreen rendering, body maps, videos and the live view of `protamer finetune`.
+
+Host-side only. The learners (agents/, human/) never import this package; the commands do.
+"""

@@ -1,0 +1,100 @@
+"""The live page of `protamer finetune --view web` in a real browser: Debian's chromium, headless, driven
+by Playwright (its own browser download is not used: executable_path)."""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mjx_protamer.human.queue import FeedbackLog
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONUNBUFFERED": "1"}
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+
+
+class Session:
+    """A finetune subprocess whose output is collected by a thread (the pipe never fills)."""
+
+    def __init__(self, argv):
+        self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=ENV,
+                                     cwd=ROOT)
+        self.lines: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.lines.append(line)
+
+    def wait_for(self, prefix: str, timeout: float = 300.0) -> str:
+        end = time.time() + timeout
+        while time.time() < end:
+            for line in list(self.lines):
+                if line.startswith(prefix):
+                    return line.strip()
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        raise AssertionError(f"{prefix!r} not seen; output:\n{''.join(self.lines)[-3000:]}")
+
+
+def _image(png: bytes) -> np.ndarray:
+    import imageio.v3 as iio
+    return iio.imread(io.BytesIO(png)).astype(int)
+
+
+def test_live_page_in_headless_chromium_shows_the_run_and_its_buttons_feed_the_queue(toy_run, tmp_path):
+    sync_api = pytest.importorskip("playwright.sync_api")
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("needs Debian's chromium (apt-get install chromium; scripts/test.sh does as root)")
+    out = tmp_path / "ft"
+    s = Session([sys.executable, "-m", "mjx_protamer.cli", "finetune", "--feedback", "web", "--view", "web",
+                 "--checkpoint", str(toy_run), "--out", str(out), "--seconds", "600"])
+    try:
+        url = s.wait_for("[view] http://127.0.0.1:").split(" ", 1)[1]
+        s.wait_for("[finetune] ready: give feedback now")
+        with sync_api.sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1000, "height": 640})
+            assert page.goto(url.split("?")[0]).status == 403  # no token, no page
+            assert page.goto(url).status == 200
+            page.wait_for_function("Number(document.getElementById('frame').dataset.seq) >= 3", timeout=60_000)
+            first = _image(page.locator("#frame").screenshot())
+            time.sleep(1.5)
+            second = _image(page.locator("#frame").screenshot())
+            assert np.abs(first - second).mean() > 0.2, "the picture does not move"
+            page.click("#good")
+            page.wait_for_function("document.getElementById('ack').textContent === '+1 accepted'", timeout=10_000)
+            time.sleep(0.5)
+            page.keyboard.press("-")  # the page's keys, as in the terminal
+            page.wait_for_function("document.getElementById('ack').textContent === '-1 accepted'", timeout=10_000)
+            # the learner drained and credited them; the page shows what the last one credited
+            page.wait_for_function("document.getElementById('last').textContent.includes('credited steps')",
+                                   timeout=20_000)
+            assert page.inner_text("#learner").startswith("ddpg, feedback web")
+            assert int(page.inner_text("#step")) > 0  # the step on screen
+            page.screenshot(path=str(tmp_path / "live_page.png"))
+            browser.close()
+        s.proc.send_signal(signal.SIGINT)
+        assert s.proc.wait(120) == 130
+    finally:
+        if s.proc.poll() is None:
+            s.proc.kill()
+    text = "".join(s.lines)
+    events = FeedbackLog.read(out / "feedback.jsonl")
+    assert [e.value for e in events] == [1.0, -1.0], text
+    assert all(e.source == "keyboard" and e.details["via"] == "web" for e in events)
+    assert text.count("accepted, credited steps") == 2
+    assert "[view] closed" in text and (tmp_path / "live_page.png").stat().st_size > 10_000
