@@ -52,7 +52,12 @@ def load_run(path: str | Path):
     from mjx_protamer.experiments.env_factory import make_env
 
     run_dir, ckpt_dir, step = resolve_checkpoint(path)
-    config = load_config(PretrainConfig, run_dir / CONFIG_NAME)
+    import yaml
+
+    saved = yaml.safe_load((run_dir / CONFIG_NAME).read_text()) or {}
+    # Runs saved before the backend choice existed ran (and checkpointed their env state) on MJX.
+    legacy = [] if "backend" in (saved.get("env") or {}) else ["env.backend=mjx"]
+    config = load_config(PretrainConfig, run_dir / CONFIG_NAME, legacy)
     env = make_env(config)
     trainer = make_train(config, env, devices=jax.devices()[:1])
     mngr = checkpoints.manager(ckpt_dir)

@@ -38,8 +38,9 @@ def run_pretrain(
     and the feedback carry to `checkpoints_feedback/` (so `resume` is exact with feedback too).
     """
     from mjx_protamer.agents.ddpg.train import make_train
-    from mjx_protamer.experiments.env_factory import make_env
+    from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
 
+    config = with_resolved_backend(config, announce=progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ckpt_dir = out / "checkpoints"
