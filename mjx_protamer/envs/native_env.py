@@ -38,8 +38,15 @@ class NativeData:
     contact_force: jax.Array  # (n_contacts,) normal force
 
 
-def _data(outputs) -> NativeData:
-    return NativeData(*(jnp.asarray(x) for x in outputs))
+def unpack(physics: NativePhysics, bits, packed, geom) -> NativeData:
+    """NativeData from `NativePhysics` outputs (NumPy or JAX arrays, any leading batch shape)."""
+    lead = packed.shape[:-1]
+    fields, offset = {}, 0
+    for name, shape in physics.fields():
+        size = int(np.prod(shape))
+        fields[name] = packed[..., offset:offset + size].reshape(lead + shape)
+        offset += size
+    return NativeData(state=bits, contact_geom=geom, **fields)
 
 
 class NativeSelfTouchEnv(SelfTouchEnv):
@@ -49,23 +56,18 @@ class NativeSelfTouchEnv(SelfTouchEnv):
         m = self.model
         self.physics = NativePhysics(m, self.config.physics, n_contacts=self.config.physics.max_contact_points)
         rows = self.physics.state_rows(m.init_qpos, m.init_qvel, m.rest_ctrl, m.init_warmstart)
-        init_data = jax.tree.map(lambda x: x[0], _data(self.physics.forward(rows)))
+        init = [jnp.asarray(x[0]) for x in self.physics.forward(rows)]
         pool_rows = self.physics.state_rows(m.start_qpos, m.start_qvel, m.start_ctrl, m.start_warmstart)
-        pool = _data(self.physics.forward(pool_rows))
-        self._result_shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), init_data)
-        return init_data, pool
+        pool = unpack(self.physics, *(jnp.asarray(x) for x in self.physics.forward(pool_rows)))
+        self._result_shapes = tuple(jax.ShapeDtypeStruct(x.shape, x.dtype) for x in init)
+        return unpack(self.physics, *init), pool
 
     def _physics_step(self, d: NativeData, action):
-        shapes = (self._result_shapes, jax.ShapeDtypeStruct((), jnp.bool_))
-
-        def host_step(bits, action):
-            *out, bad = self.physics.step(np.asarray(bits), np.asarray(action))
-            return NativeData(*out), bad
-
+        shapes = self._result_shapes + (jax.ShapeDtypeStruct((), jnp.bool_),)
         # One call per vectorised step: under vmap the callback receives the whole batch.
-        new, bad = jax.pure_callback(host_step, shapes, d.state, action.astype(jnp.float32),
-                                     vmap_method="broadcast_all")
-        return new, bad
+        *out, bad = jax.pure_callback(self.physics.step, shapes, d.state, action.astype(jnp.float32),
+                                      vmap_method="broadcast_all")
+        return unpack(self.physics, *out), bad
 
     def _restore_start(self, d: NativeData, bad):
         # The state row defines the next step completely; the derived fields follow it for consistency.

@@ -73,7 +73,7 @@ class NativePhysics:
         self.nstate = mujoco.mj_stateSize(m, STATE_SPEC)
         self.n_slots = len(self.pairs) * SLOTS_PER_PAIR
         self.n_contacts = min(n_contacts, self.n_slots) if n_contacts > 0 else self.n_slots
-        self.slot_geom = np.repeat(self.pairs, SLOTS_PER_PAIR, axis=0)  # (S, 2)
+        self.slot_geom = np.repeat(self.pairs, SLOTS_PER_PAIR, axis=0).astype(np.int32)  # (S, 2)
         self.nthread = nthread or (os.cpu_count() or 1)
         self._action_lo = model.ctrl_lo
         self._action_hi = model.ctrl_hi
@@ -128,17 +128,17 @@ class NativePhysics:
         """One physics step of each world: `bits` (..., 2 nstate) uint32 rows, `action` (..., nu) in [-1, 1].
 
         The action becomes position targets here, in float64, exactly as the twin computes them.
-        Returns `outputs` (see `_outputs`) for the stepped worlds; `bad` marks worlds whose state
-        diverged (MuJoCo's bad-state warnings rose, non-finite state, or a simulation error).
+        Returns (state bits, packed float32 fields (see `FIELDS`), contact geom pairs, bad) for the
+        stepped worlds; `bad` marks worlds whose state diverged (MuJoCo's bad-state warnings rose,
+        non-finite state, or a simulation error).
         """
         lead = bits.shape[:-1]
         rows = self.bits_to_rows(bits.reshape(-1, bits.shape[-1]))
         a = np.clip(np.asarray(action, np.float64).reshape(rows.shape[0], -1), -1.0, 1.0)
-        ctrl = self._action_lo + 0.5 * (a + 1.0) * (self._action_hi - self._action_lo)
         with self._lock:
             b = self._batch(rows.shape[0])
             b.state[:] = rows
-            b.state[:, self._ctrl_slice] = ctrl
+            b.state[:, self._ctrl_slice] = self._action_lo + 0.5 * (a + 1.0) * (self._action_hi - self._action_lo)
             before = b.warning[:, _BAD_STATE_WARNINGS, 1].sum(axis=1)
             failed = np.zeros(rows.shape[0], bool)
             try:
@@ -147,7 +147,7 @@ class NativePhysics:
                 failed[np.asarray(e.ids)] = True
             bad = failed | (b.warning[:, _BAD_STATE_WARNINGS, 1].sum(axis=1) != before)
             out = self._outputs(b)
-        bad |= ~np.isfinite(out[1]).all(axis=1) | ~np.isfinite(out[2]).all(axis=1)
+        bad |= ~np.isfinite(out[1]).all(axis=1)
         return tuple(x.reshape(lead + x.shape[1:]) for x in out + (bad,))
 
     def forward(self, rows: np.ndarray):
@@ -159,29 +159,29 @@ class NativePhysics:
             b.forward()
             return self._outputs(b)
 
-    def _outputs(self, b: mujoco.batch.Batch):
-        """(state bits, qpos, qvel, actuator_force, geom_xpos, geom_xmat, contact geom, pos, dist, normal force).
+    def fields(self) -> tuple[tuple[str, tuple[int, ...]], ...]:
+        """Name and per-world shape of each float32 field packed by `step`, in order."""
+        m, c = self.mj_model, self.n_contacts
+        return (("qpos", (m.nq,)), ("qvel", (m.nv,)), ("actuator_force", (m.nu,)), ("geom_xpos", (m.ngeom, 3)),
+                ("geom_xmat", (m.ngeom, 3, 3)), ("contact_pos", (c, 3)), ("contact_dist", (c,)),
+                ("contact_force", (c,)))
 
-        Copies (the batch overwrites its outputs on the next call); float32 but the state bits.
+    def _outputs(self, b: mujoco.batch.Batch):
+        """(state bits, the float fields packed in one float32 row per world, contact geom pairs).
+
+        Copies: the batch overwrites its outputs on the next call. One packed array instead of eight
+        keeps the per-call overhead of the callback small (it matters for a single env).
         """
         n = b.nsim
         state = b.state.copy()
         slots = b.sensordata.reshape(n, self.n_slots, _SLOT_WIDTH)
-        # A slot no contact filled is all zeros: give it no penetration, so sensing ignores it.
-        used = np.any(slots != 0.0, axis=2)
-        dist = np.where(used, slots[:, :, 4], 1.0)
+        # An empty slot is all zeros: penetration 0, which sensing counts as no contact (dist < 0 is
+        # a contact), and which sorts after every real contact.
+        dist = slots[:, :, 4]
         order = np.argsort(dist, axis=1, kind="stable")[:, : self.n_contacts]
         pick = np.take_along_axis(slots, order[:, :, None], axis=1)
-        f32 = np.float32
-        return (
-            state.view(np.uint32),
-            state[:, self._qpos_slice].astype(f32),
-            state[:, self._qvel_slice].astype(f32),
-            b.actuator_force.astype(f32),
-            b.geom_xpos.astype(f32),
-            b.geom_xmat.reshape(n, -1, 3, 3).astype(f32),
-            self.slot_geom[order].astype(np.int32),
-            pick[:, :, 5:8].astype(f32),
-            np.take_along_axis(dist, order, axis=1).astype(f32),
-            pick[:, :, 1].astype(f32),
-        )
+        packed = np.concatenate([
+            state[:, self._qpos_slice], state[:, self._qvel_slice], b.actuator_force,
+            b.geom_xpos.reshape(n, -1), b.geom_xmat.reshape(n, -1),
+            pick[:, :, 5:8].reshape(n, -1), pick[:, :, 4], pick[:, :, 1]], axis=1).astype(np.float32)
+        return state.view(np.uint32), packed, self.slot_geom[order]

@@ -54,8 +54,10 @@ def test_contact_sensors_give_mujocos_contacts(native_env):
     d = mujoco.MjData(m)
     hand, region = native_env.model.sensing.geom_hand, native_env.model.sensing.geom_region
     states = list(_random_states(m, native_env.model, 300, seed=4))
-    out = phys.forward(phys.state_rows(*(np.array(x) for x in zip(*states))))
-    _, _, _, _, _, _, geom, pos, dist, force = out
+    from mjx_protamer.envs.native_env import unpack
+
+    out = unpack(phys, *phys.forward(phys.state_rows(*(np.array(x) for x in zip(*states)))))
+    geom, pos, dist, force = out.contact_geom, out.contact_pos, out.contact_dist, out.contact_force
     with_contact = 0
     for i, (qpos, qvel, ctrl, ws) in enumerate(states):
         d.qpos[:], d.qvel[:], d.ctrl[:], d.qacc_warmstart[:] = qpos, qvel, ctrl, ws
@@ -132,6 +134,7 @@ def test_one_step_agrees_with_mjx_at_the_converged_solver(eq_mjx_env, eq_twin):
     one precision and not the other, or MJX's deepest-8 contact selection drops one]."""
     import jax
     import jax.numpy as jnp
+    from mjx_protamer.envs.native_env import unpack
     from mjx_protamer.envs.native_physics import NativePhysics
 
     env = eq_mjx_env
@@ -153,8 +156,9 @@ def test_one_step_agrees_with_mjx_at_the_converged_solver(eq_mjx_env, eq_twin):
     states = [np.array(x) for x in zip(*states)]
     actions = np.array(actions)
     rows = phys.state_rows(*states)
-    out = phys.step(phys.rows_to_bits(rows), actions)
-    qpos_n, qvel_n, bad = out[1], out[2], out[-1]
+    bits, packed, geom, bad = phys.step(phys.rows_to_bits(rows), actions)
+    stepped = unpack(phys, bits, packed, geom)
+    qpos_n, qvel_n = stepped.qpos, stepped.qvel
 
     @jax.jit
     def mjx_step(qpos, qvel, ctrl, ws, action):
