@@ -11,7 +11,8 @@ Three measurements, in one process, each the median of `--repeats` timed runs af
   SB3's critic takes the action at its input layer, not the second: the cost differs by a few hundred MACs;
 - `batched256_steps_per_s`: pure JAX with `--batched-envs` (256) envs and one update per vectorised step.
 
-Those three use the backend `auto` picks (native MuJoCo on a CPU, MJX on an accelerator). Side by side, for
+Those three use the backend `auto` picks for their number of envs (on a CPU: MJX for one env, native
+MuJoCo for a batch; MJX on an accelerator; `backend_single`, `backend_batched`). Side by side, for
 each of `--backends` (self_touch only): `single_env_steps_per_s` and `batched_steps_per_s` keyed by backend,
 and `ratio_batched_native_vs_mjx`.
 
@@ -168,11 +169,14 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
     env = make_env(single)
     jax_single = _time_jax(env, single, args.repeats)
     batched = _config(args.env, args.batched_envs, args.batched_iterations)
-    jax_batched = _time_jax(env, batched, args.repeats)
-    chosen = resolve_backend(single.env.backend) if args.env == "self_touch" else None
+    jax_batched = _time_jax(make_env(batched), batched, args.repeats)
+    self_touch = args.env == "self_touch"
+    chosen_single = resolve_backend("auto", 1) if self_touch else None
+    chosen_batched = resolve_backend("auto", args.batched_envs) if self_touch else None
     result = {
         "env": args.env,
-        "backend": chosen,
+        "backend_single": chosen_single,
+        "backend_batched": chosen_batched,
         "steps_per_s": jax_single["median"],
         "batched256_steps_per_s": jax_batched["median"],
         "batched_envs": args.batched_envs,
@@ -198,17 +202,15 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
                   single_env_roofline_steps_per_s=roofline,
                   single_env_fraction_of_roofline=jax_single["median"] / roofline)
 
-    if args.env == "self_touch":
-        result.update(single_env_steps_per_s={chosen: jax_single["median"]},
-                      batched_steps_per_s={chosen: jax_batched["median"]})
+    if self_touch:
+        result.update(single_env_steps_per_s={chosen_single: jax_single["median"]},
+                      batched_steps_per_s={chosen_batched: jax_batched["median"]})
         for backend in _parse_backends(getattr(args, "backends", "mjx,native")):
-            if backend == chosen:
-                continue
-            cfg_1, cfg_b = (_config(args.env, n, k, backend) for n, k in
-                            ((1, args.steps), (args.batched_envs, args.batched_iterations)))
-            other = make_env(cfg_1)
-            result["single_env_steps_per_s"][backend] = _time_jax(other, cfg_1, args.repeats)["median"]
-            result["batched_steps_per_s"][backend] = _time_jax(other, cfg_b, args.repeats)["median"]
+            for key, n, k in (("single_env_steps_per_s", 1, args.steps),
+                              ("batched_steps_per_s", args.batched_envs, args.batched_iterations)):
+                if backend not in result[key]:
+                    cfg = _config(args.env, n, k, backend)
+                    result[key][backend] = _time_jax(make_env(cfg), cfg, args.repeats)["median"]
         rates = result["batched_steps_per_s"]
         result["ratio_batched_native_vs_mjx"] = (rates["native"] / rates["mjx"]
                                                  if {"native", "mjx"} <= rates.keys() else None)

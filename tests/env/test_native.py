@@ -236,14 +236,21 @@ def test_backend_choice_resolves_validates_and_is_recorded(capsys):
     from mjx_protamer.config import ConfigError, load_config, to_dict
     from mjx_protamer.experiments.env_factory import resolve_backend, with_resolved_backend
 
+    from mjx_protamer.experiments.env_factory import NATIVE_MIN_ENVS
+
     expected = "native" if jax.default_backend() == "cpu" else "mjx"
     assert resolve_backend("auto") == expected
+    assert resolve_backend("auto", num_envs=NATIVE_MIN_ENVS) == expected
+    assert resolve_backend("auto", num_envs=1) == "mjx", "one world steps faster on MJX (callback overhead)"
+    assert resolve_backend("native", num_envs=1) == "native"
     assert resolve_backend("mjx") == "mjx" and resolve_backend("native") == "native"
     config = load_config(PretrainConfig, None, [])
     assert config.env.backend == "auto"
     resolved = with_resolved_backend(config)
     assert to_dict(resolved)["env"]["backend"] == expected
     assert f"physics backend: {expected} (auto" in capsys.readouterr().out
+    single = with_resolved_backend(load_config(PretrainConfig, None, ["train.num_envs=1"]))
+    assert single.env.backend == "mjx"
     forced = with_resolved_backend(load_config(PretrainConfig, None, ["env.backend=mjx"]))
     assert forced.env.backend == "mjx"
     with pytest.raises(ConfigError, match=r"'env.backend': must be one of auto, mjx, native, got 'gpu'"):
