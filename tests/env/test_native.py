@@ -188,11 +188,13 @@ def batched_native(native_env):
     return native_env, jax.jit(benv.reset), jax.jit(benv.step)
 
 
-def test_nan_state_resets_that_env_only_and_is_counted(batched_native):
+def test_nan_state_resets_that_env_only_and_is_counted(batched_native, tmp_path, monkeypatch):
     """A world whose state turns NaN is restored to the settled start and ends its episode; the other
     world steps on exactly as it would have."""
     import jax
     import jax.numpy as jnp
+
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its bad-state warning to MUJOCO_LOG.TXT in the cwd
 
     env, reset, step = batched_native
     phys = env.physics
