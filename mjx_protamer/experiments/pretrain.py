@@ -40,7 +40,7 @@ def run_pretrain(
     from mjx_protamer.agents.ddpg.train import make_train
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
 
-    config = with_resolved_backend(config, announce=progress)
+    config = with_resolved_backend(config)  # printed even without a progress bar: the run depends on it
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ckpt_dir = out / "checkpoints"
