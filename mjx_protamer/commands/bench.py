@@ -15,9 +15,9 @@ import sys
 # name -> (module, function that returns the JSON-able result)
 BENCHMARKS = {
     "env": ("mjx_protamer.experiments.bench_env", "run_env_benchmark",
-            "MJX env steps/s at several batch sizes vs MJX physics, native MuJoCo and the NumPy twin"),
+            "MJX and native-physics env steps/s at several batch sizes vs MJX physics, native MuJoCo and the twin"),
     "train": ("mjx_protamer.experiments.bench_train", "run_train_benchmark",
-              "DDPG training steps/s (single env, batched) vs Stable-Baselines3 on the twin"),
+              "DDPG training steps/s (single env, batched; MJX and native) with the single-env roofline, vs SB3"),
     "tracking": ("mjx_protamer.experiments.tracking", "run_tracking_benchmark",
                  "position-servo tracking error on held random targets (free space and blocked)"),
     "voice": ("audio_frontend.bench", "run_voice_benchmark",

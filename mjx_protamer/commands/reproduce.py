@@ -32,6 +32,9 @@ def register(subparsers) -> None:
     t.add_argument("--out", type=Path, default=None, help="output directory (default: runs/table2-<time>)")
     t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set pretrain.train.total_env_steps=32000 (repeatable)")
+    t.add_argument("--backend", choices=("auto", "mjx", "native"), default=None,
+                   help="physics backend (the same as --set pretrain.env.backend=...); auto picks native MuJoCo "
+                   "on a CPU, MJX on an accelerator")
     t.add_argument("--quiet", action="store_true", help="no per-chunk progress lines")
     t.set_defaults(handler=_table2)
 
@@ -40,7 +43,8 @@ def _table2(args: argparse.Namespace) -> int:
     from mjx_protamer.commands.train import _enable_compile_cache
     from mjx_protamer.experiments.table2 import load_table2_config
 
-    cfg = load_table2_config(args.config, args.overrides, args.seeds)
+    overrides = list(args.overrides) + ([f"pretrain.env.backend={args.backend}"] if args.backend else [])
+    cfg = load_table2_config(args.config, overrides, args.seeds)
     _enable_compile_cache()
     out = args.out or Path("runs") / time.strftime("table2-%Y%m%d-%H%M%S")
     from mjx_protamer.experiments.table2 import run_table2

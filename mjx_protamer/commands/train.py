@@ -22,6 +22,9 @@ def register(subparsers) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set train.num_envs=64 (repeatable)")
     p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/pretrain-<time>)")
+    p.add_argument("--backend", choices=("auto", "mjx", "native"), default=None,
+                   help="physics backend (the same as --set env.backend=...): native MuJoCo on a CPU, MJX on "
+                   "an accelerator; auto (the default) picks by JAX's device")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--feedback", default=None, metavar="simulated:KIND",
@@ -69,6 +72,8 @@ def _pretrain(args: argparse.Namespace) -> int:
 
     if args.resume and args.out is None:
         raise ConfigError("--resume needs --out, the run directory to continue")
+    if args.backend is not None:
+        args.overrides = list(args.overrides) + [f"env.backend={args.backend}"]
     fb_overrides = [o for o in args.overrides if o.split("=", 1)[0].split(".")[0] in ("feedback", "batched")]
     overrides = [o for o in args.overrides if o not in fb_overrides]
     if args.feedback is None and (args.feedback_config is not None or fb_overrides):

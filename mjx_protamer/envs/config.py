@@ -81,6 +81,10 @@ class RewardConfig:
         return (self.contact, self.novelty, self.region, self.movement, self.energy, self.joint_limit)
 
 
+# Physics backends: MJX (JAX, for accelerators) or native C MuJoCo through a callback (for CPUs);
+# "auto" picks native when JAX runs on the CPU and MJX otherwise (experiments/env_factory.py).
+BACKENDS = ("auto", "mjx", "native")
+
 REWARD_TERMS = ("contact", "novelty", "region", "movement", "energy", "joint_limit")
 
 
@@ -108,8 +112,10 @@ class EnvConfig:
     physics: PhysicsConfig = PhysicsConfig()
     touch: TouchConfig = TouchConfig()
     reward: RewardConfig = RewardConfig()
+    backend: str = "auto"
 
     def validate(self) -> None:
+        check(self.backend in BACKENDS, "backend", f"must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
         check(1 <= self.k <= 40, "k", f"must be an integer in [1, 40] (nearest touch sensors), got {self.k}")
         check(self.episode_length >= 1, "episode_length", f"must be >= 1, got {self.episode_length}")
         for field in ("qpos_joints", "qvel_joints", "speed_joints"):

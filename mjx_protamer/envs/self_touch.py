@@ -20,39 +20,62 @@ from mjx_protamer.envs.reward import reward_terms
 
 
 class SelfTouchEnv:
+    backend = "mjx"
+
     def __init__(self, config: EnvConfig | None = None):
         self.config = config or EnvConfig()
         self.model = build_model(self.config)
         m = self.model.mj_model
-        self.mjx_model = mjx.put_model(m)
         self.observation_size = self.config.observation_size
         self.action_size = m.nu
         self.reward_term_names = REWARD_TERMS
         self.reward_weights = self.config.reward.weights()
         self._tables = self.model.sensing.as_xp(jnp)
         self._weights = jnp.asarray(self.reward_weights, jnp.float32)
+        # The settled state (`init_data`, where a diverged world is restored) and the pool of episode
+        # starts (model.py), both forwarded by the physics backend; the starts are sensed once here, so
+        # a reset is a gather.
+        self.init_data, pool = self._setup_physics()
+        self._start_states = jax.jit(jax.vmap(self._start_state))(pool)
 
+    # --- the physics backend (MJX here; native_env.py overrides these four) ---------------------
+    def _setup_physics(self):
+        """The device model; returns the forwarded settled state and the forwarded pool of starts."""
+        m = self.model.mj_model
+        self.mjx_model = mjx.put_model(m)
         d = mjx.make_data(self.mjx_model)
         d = d.replace(qpos=jnp.asarray(self.model.init_qpos, jnp.float32),
                       qvel=jnp.asarray(self.model.init_qvel, jnp.float32),
                       ctrl=jnp.asarray(self.model.rest_ctrl, jnp.float32),
                       qacc_warmstart=jnp.asarray(self.model.init_warmstart, jnp.float32))
-        self.init_data = jax.jit(mjx.forward)(self.mjx_model, d)
+        init_data = jax.jit(mjx.forward)(self.mjx_model, d)
         # Contact slots are grouped by condim in MJX; each slot's dimension is fixed by the model.
         # Only the self-contact group's slots can touch a hand (when the floor has its own condim).
-        contact = self.init_data._impl.contact
-        dim = np.asarray(contact.dim)
+        dim = np.asarray(init_data._impl.contact.dim)
         phys = self.config.physics
         self._self_slots = (np.arange(len(dim)) if phys.self_condim == phys.floor_condim
                             else np.where(dim == phys.self_condim)[0])
         self._n_pyramid = np.where(dim == 1, 1, 2 * (dim - 1))[self._self_slots]
-        # The pool of episode starts (model.py), forwarded and sensed once: a reset is then a gather.
         pool = jax.tree.map(lambda x: jnp.broadcast_to(x, (self.config.reset_pool_size,) + x.shape), d)
         pool = pool.replace(qpos=jnp.asarray(self.model.start_qpos, jnp.float32),
                             qvel=jnp.asarray(self.model.start_qvel, jnp.float32),
                             ctrl=jnp.asarray(self.model.start_ctrl, jnp.float32),
                             qacc_warmstart=jnp.asarray(self.model.start_warmstart, jnp.float32))
-        self._start_states = jax.jit(jax.vmap(lambda d: self._start_state(mjx.forward(self.mjx_model, d))))(pool)
+        return init_data, jax.jit(jax.vmap(lambda d: mjx.forward(self.mjx_model, d)))(pool)
+
+    def _physics_step(self, d, action):
+        """One physics step from `d` under `action`: the new data and whether the world diverged."""
+        ctrl = self.model.next_ctrl(jnp, d.ctrl, action, self.config.action_smoothing).astype(jnp.float32)
+        d = mjx.step(self.mjx_model, d.replace(ctrl=ctrl))
+        bad = ~(jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel)))
+        return d, bad
+
+    def _restore_start(self, d, bad):
+        """A diverged world's integrated state back to the settled start (the rest of mjx.Data is
+        recomputed from it by the next step)."""
+        init = self.init_data
+        return d.replace(**{f: jnp.where(bad, getattr(init, f), getattr(d, f))
+                            for f in ("qpos", "qvel", "act", "qacc_warmstart")})
 
     # --- contacts and sensing -------------------------------------------------------------------
     def contacts(self, d: mjx.Data):
@@ -106,18 +129,13 @@ class SelfTouchEnv:
     def step(self, state: State, action: jax.Array) -> State:
         if action.shape != (self.action_size,):
             raise ValueError(f"action must have shape ({self.action_size},) per env, got {action.shape}")
-        ctrl = self.model.next_ctrl(jnp, state.data.ctrl, action, self.config.action_smoothing).astype(jnp.float32)
-        d = mjx.step(self.mjx_model, state.data.replace(ctrl=ctrl))
-        # A diverged env must not poison the batch: its outputs are zeroed, its integrated state is
-        # restored to the settled start (the rest of mjx.Data is recomputed from it by the next
-        # step) and the episode ends, so an auto-reset wrapper starts it afresh.
-        bad = ~(jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel)))
+        d, bad = self._physics_step(state.data, action)
+        # A diverged env must not poison the batch: its outputs are zeroed, its state is restored to
+        # the settled start and the episode ends, so an auto-reset wrapper starts it afresh.
         touch, regions, extended = self.sense(d)
         obs, reward, metrics = self._transition(d, touch, regions, extended, state.info["prev_touch"],
                                                 state.info["prev_regions"], action)
-        init = self.init_data
-        d = d.replace(**{f: jnp.where(bad, getattr(init, f), getattr(d, f))
-                         for f in ("qpos", "qvel", "act", "qacc_warmstart")})
+        d = self._restore_start(d, bad)
         obs, reward, touch = (jnp.where(bad, 0.0, x) for x in (obs, reward, touch))
         metrics = {k: jnp.where(bad, 0.0, v) for k, v in metrics.items()}
         regions = regions & ~bad

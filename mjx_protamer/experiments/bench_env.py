@@ -6,6 +6,12 @@ One run measures, on this machine:
   random actions, at each batch size; compile time (first call) reported separately, steps/s the
   median of `--repeats` timed chunks;
 - MJX physics-only steps/s: vmapped `mjx.step` under the same scan, same model, at batch 256;
+- native full env steps/s (`NativeSelfTouchEnv`: native MuJoCo through one `jax.pure_callback` per
+  vectorised step, sensing and reward in JAX), the same wrapped chunk at each batch size, and its compile;
+- native physics-only steps/s through `mujoco.batch` (the native env's engine: state rows in, step, the
+  bound outputs copied out) at batch 256, beside `mujoco.rollout`;
+- the alternative to the callback: a Python loop that steps the native physics on the host and calls a
+  jitted post-physics step (sensing, reward, wrappers) per vectorised step (`native_host_loop_steps_per_s`);
 - native MuJoCo physics-only steps/s: `mujoco.rollout.rollout` on all cores (one MjData per thread);
 - the NumPy twin's steps/s (native physics + NumPy sensing/reward, one env, Python loop);
 - contact fidelity: self-contact rate and region frequencies of the same held-random-target rollouts
@@ -69,7 +75,7 @@ def _timed(fn, repeats: int) -> tuple[float, list[float]]:
 
 
 # --- MJX ---------------------------------------------------------------------------------------------
-def _bench_mjx_env(env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
+def _bench_env(env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
     import jax
 
     from mjx_protamer.envs.wrappers import wrap_for_training
@@ -139,6 +145,62 @@ def _bench_mjx_physics(env, batch: int, steps: int, repeats: int, seed: int = 0)
 
 
 # --- native C and the NumPy twin -----------------------------------------------------------------------
+def _bench_native_batch_physics(native_env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
+    """`NativePhysics.step` alone (mujoco.batch, the outputs the env reads copied out), host loop."""
+    physics = native_env.physics
+    bits = np.tile(np.asarray(native_env.init_data.state), (batch, 1))
+    actions = np.random.default_rng(seed).uniform(-1, 1, (steps, batch, native_env.action_size)).astype(np.float32)
+    holder = [bits]
+
+    def run():
+        for a in actions:
+            holder[0] = physics.step(holder[0], a)[0]
+
+    run()  # warm-up (the batch for this size is made once)
+    med, times = _timed(run, repeats)
+    return {"steps_per_s": batch * steps / med, "chunk_s": times, "nthread": physics.nthread}
+
+
+def _bench_native_host_loop(native_env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
+    """The alternative to the in-jit callback: per vectorised step, native physics on the host, then one
+    jitted call for the rest of the env step (sensing, reward, observation, auto-reset)."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_protamer.envs.native_env import unpack
+    from mjx_protamer.envs.wrappers import wrap_for_training
+
+    class _Prestepped(type(native_env)):
+        """The physics already ran on the host: the step takes the stepped data as it is."""
+
+        def __init__(self, base):
+            self.__dict__.update(base.__dict__)
+
+        def _physics_step(self, d, action):
+            return d, jnp.bool_(False)
+
+    wrapped = wrap_for_training(_Prestepped(native_env), 1000)
+    physics = native_env.physics
+    state = jax.jit(wrapped.reset)(jax.random.split(jax.random.PRNGKey(seed), batch))
+    post = jax.jit(lambda s, d, a: wrapped.step(s.replace(data=d), a), donate_argnums=0)
+    actions = np.random.default_rng(seed).uniform(-1, 1, (steps, batch, native_env.action_size)).astype(np.float32)
+    holder = [state]
+
+    def run():
+        s = holder[0]
+        for a in actions:
+            *out, _ = physics.step(np.asarray(s.data.state), a)
+            s = post(s, unpack(physics, *out), a)
+        jax.block_until_ready(s.reward)
+        holder[0] = s
+
+    t = time.perf_counter()
+    run()  # compile + warm-up
+    compile_s = time.perf_counter() - t
+    med, times = _timed(run, repeats)
+    return {"steps_per_s": batch * steps / med, "chunk_s": times, "first_run_s": compile_s}
+
+
 def _bench_native_physics(model, batch: int, steps: int, repeats: int, nthread: int, seed: int = 0) -> dict:
     import mujoco
     from mujoco import rollout
@@ -266,7 +328,7 @@ def run_env_benchmark(args) -> dict:
     env = SelfTouchEnv()
     report: dict = {"mjx_env_steps_per_s": {}, "mjx_env_compile_s": {}}
     for b in sizes:
-        r = _bench_mjx_env(env, b, steps, repeats)
+        r = _bench_env(env, b, steps, repeats)
         report["mjx_env_steps_per_s"][str(b)] = r["steps_per_s"]
         report["mjx_env_compile_s"][str(b)] = r["compile_s"]
     phys = _bench_mjx_physics(env, physics_batch, steps, repeats)
@@ -281,8 +343,26 @@ def run_env_benchmark(args) -> dict:
     report["native_physics_threads"] = nthread
     report["native_physics_steps_per_s_1thread"] = native_1["steps_per_s"]
     report["numpy_twin_steps_per_s"] = _bench_twin(env.config, twin_steps)["steps_per_s"]
-
     env_at = report["mjx_env_steps_per_s"].get(str(physics_batch))
+
+    from mjx_protamer.envs.native_env import NativeSelfTouchEnv
+
+    native_env = NativeSelfTouchEnv(env.config)
+    report.update(native_env_steps_per_s={}, native_env_compile_s={})
+    for b in sizes:
+        r = _bench_env(native_env, b, steps, repeats)
+        report["native_env_steps_per_s"][str(b)] = r["steps_per_s"]
+        report["native_env_compile_s"][str(b)] = r["compile_s"]
+    batch_phys = _bench_native_batch_physics(native_env, physics_batch, steps, repeats)
+    report["native_batch_physics_steps_per_s"] = batch_phys["steps_per_s"]
+    report["native_batch_physics_threads"] = batch_phys["nthread"]
+    report["native_host_loop_steps_per_s"] = _bench_native_host_loop(native_env, physics_batch, steps,
+                                                                     repeats)["steps_per_s"]
+    native_at = report["native_env_steps_per_s"].get(str(physics_batch))
+    report["ratio_native_env_vs_mjx_env"] = (native_at / env_at) if (native_at and env_at) else None
+    report["ratio_native_env_vs_native_physics"] = (native_at / batch_phys["steps_per_s"]) if native_at else None
+    report["ratio_callback_vs_host_loop"] = (native_at / report["native_host_loop_steps_per_s"]) if native_at else None
+
     report["ratio_mjx256_vs_native"] = (env_at / report["native_physics_steps_per_s"]) if env_at else None
     report["ratio_mjx256_vs_numpy_twin"] = (env_at / report["numpy_twin_steps_per_s"]) if env_at else None
     report["ratio_mjx256_vs_reference_env_460"] = (env_at / 460.0) if env_at else None

@@ -11,6 +11,19 @@ Three measurements, in one process, each the median of `--repeats` timed runs af
   SB3's critic takes the action at its input layer, not the second: the cost differs by a few hundred MACs;
 - `batched256_steps_per_s`: pure JAX with `--batched-envs` (256) envs and one update per vectorised step.
 
+Those three use the backend `auto` picks for their number of envs (on a CPU: MJX for one env, native
+MuJoCo for a batch; MJX on an accelerator; `backend_single`, `backend_batched`). Side by side, for
+each of `--backends` (self_touch only): `single_env_steps_per_s` and `batched_steps_per_s` keyed by backend,
+and `ratio_batched_native_vs_mjx`.
+
+The single-env roofline, measured in the same run: one update of the paper's networks costs
+`update_flops` (the matmuls of target actor + target critic forward, critic forward and backward, actor
+and critic forward and backward for the actor loss; counted from the layer sizes), which at this machine's
+`matmul_flops_per_s` (a jitted 1024^3 float32 matmul, the best JAX does here) takes
+`update_flops / matmul_flops_per_s`; one env step takes `1 / single_env_env_steps_per_s` (the env alone at
+batch 1, the chunk's backend). `single_env_roofline_steps_per_s` is one over their sum, and
+`single_env_fraction_of_roofline = steps_per_s / single_env_roofline_steps_per_s`.
+
 `ratio_vs_sb3 = steps_per_s / sb3_steps_per_s`.
 """
 
@@ -32,17 +45,62 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vectorised steps per timed batched run")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--skip-sb3", action="store_true", help="do not run Stable-Baselines3")
+    parser.add_argument("--backends", default="mjx,native",
+                        help="physics backends to train on side by side (self_touch; default mjx,native; '' for none)")
 
 
-def _config(env_name: str, num_envs: int, chunk_steps: int):
+def _config(env_name: str, num_envs: int, chunk_steps: int, backend: str = "auto"):
     from mjx_protamer.agents.ddpg.config import PretrainConfig
     from mjx_protamer.config import load_config
 
     return load_config(PretrainConfig, None, [
         f"env_name={env_name}", f"train.num_envs={num_envs}", f"train.chunk_steps={chunk_steps}",
         f"train.total_env_steps={num_envs * chunk_steps * 4}", f"train.warmup_env_steps={max(64, num_envs)}",
-        "train.updates_per_step=1", "train.num_devices=1",
+        "train.updates_per_step=1", "train.num_devices=1", f"env.backend={backend}",
     ] + (["train.episode_length=25"] if env_name == "toy" else []))
+
+
+def _parse_backends(text: str) -> list[str]:
+    names = [b.strip() for b in str(text).split(",") if b.strip()]
+    bad = [b for b in names if b not in ("mjx", "native")]
+    if bad:
+        raise ValueError(f"--backends must name mjx and/or native (comma-separated), got {text!r}")
+    return names
+
+
+def update_flops(obs_size: int, action_size: int, actor_hidden, critic_hidden, batch: int) -> float:
+    """Matmul FLOPs of one DDPG update (networks.py's shapes; the critic takes the action at layer 2).
+
+    Forward MACs per sample: A (actor), C (critic). The update runs the target actor and critic forward
+    (A + C), the critic forward and backward (3 C: a backward pass costs two forwards), and the actor loss
+    through actor and critic forward and backward (3 (A + C)): 4 A + 7 C MACs, 2 FLOPs each.
+    """
+    widths = [obs_size, *actor_hidden, action_size]
+    a = sum(i * o for i, o in zip(widths[:-1], widths[1:]))
+    c = obs_size * critic_hidden[0]
+    prev = critic_hidden[0] + action_size
+    for width in critic_hidden[1:]:
+        c += prev * width
+        prev = width
+    c += prev * 1
+    return 2.0 * batch * (4 * a + 7 * c)
+
+
+def measure_matmul_flops(n: int = 1024, repeats: int = 5) -> float:
+    """FLOP/s of a jitted n x n x n float32 matmul on JAX's default device (median of `repeats`)."""
+    import jax
+    import jax.numpy as jnp
+
+    x = jax.random.normal(jax.random.PRNGKey(0), (n, n), jnp.float32)
+    y = jax.random.normal(jax.random.PRNGKey(1), (n, n), jnp.float32)
+    mm = jax.jit(lambda a, b: a @ b)
+    jax.block_until_ready(mm(x, y))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(mm(x, y))
+        times.append(time.perf_counter() - t)
+    return 2.0 * n**3 / statistics.median(times)
 
 
 def _time_jax(env, config, repeats: int) -> dict:
@@ -104,15 +162,21 @@ def _time_sb3(config, steps: int, repeats: int) -> dict:
 def run_train_benchmark(args: argparse.Namespace) -> dict:
     import jax
 
-    from mjx_protamer.experiments.env_factory import make_env
+    from mjx_protamer.experiments.bench_env import _bench_env
+    from mjx_protamer.experiments.env_factory import make_env, resolve_backend
 
     single = _config(args.env, 1, args.steps)
     env = make_env(single)
     jax_single = _time_jax(env, single, args.repeats)
     batched = _config(args.env, args.batched_envs, args.batched_iterations)
-    jax_batched = _time_jax(env, batched, args.repeats)
+    jax_batched = _time_jax(make_env(batched), batched, args.repeats)
+    self_touch = args.env == "self_touch"
+    chosen_single = resolve_backend("auto", 1) if self_touch else None
+    chosen_batched = resolve_backend("auto", args.batched_envs) if self_touch else None
     result = {
         "env": args.env,
+        "backend_single": chosen_single,
+        "backend_batched": chosen_batched,
         "steps_per_s": jax_single["median"],
         "batched256_steps_per_s": jax_batched["median"],
         "batched_envs": args.batched_envs,
@@ -127,6 +191,29 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
         "devices": len(jax.devices()),
         "machine": platform.processor() or platform.machine(),
     }
+
+    # The single-env roofline: matmul peak and one env step, measured now, on this machine.
+    flops = update_flops(env.observation_size, env.action_size, single.ddpg.actor_hidden,
+                         single.ddpg.critic_hidden, single.ddpg.batch_size)
+    peak = measure_matmul_flops()
+    env_rate = _bench_env(env, 1, 200, args.repeats)["steps_per_s"]
+    roofline = 1.0 / (flops / peak + 1.0 / env_rate)
+    result.update(update_flops=flops, matmul_flops_per_s=peak, single_env_env_steps_per_s=env_rate,
+                  single_env_roofline_steps_per_s=roofline,
+                  single_env_fraction_of_roofline=jax_single["median"] / roofline)
+
+    if self_touch:
+        result.update(single_env_steps_per_s={chosen_single: jax_single["median"]},
+                      batched_steps_per_s={chosen_batched: jax_batched["median"]})
+        for backend in _parse_backends(getattr(args, "backends", "mjx,native")):
+            for key, n, k in (("single_env_steps_per_s", 1, args.steps),
+                              ("batched_steps_per_s", args.batched_envs, args.batched_iterations)):
+                if backend not in result[key]:
+                    cfg = _config(args.env, n, k, backend)
+                    result[key][backend] = _time_jax(make_env(cfg), cfg, args.repeats)["median"]
+        rates = result["batched_steps_per_s"]
+        result["ratio_batched_native_vs_mjx"] = (rates["native"] / rates["mjx"]
+                                                 if {"native", "mjx"} <= rates.keys() else None)
     if not args.skip_sb3:
         sb3 = _time_sb3(single, args.sb3_steps, args.repeats)
         result.update(sb3_steps_per_s=sb3["median"], sb3_runs=sb3["runs"], sb3_torch_threads=sb3["torch_threads"],

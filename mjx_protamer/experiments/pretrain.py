@@ -40,8 +40,9 @@ def run_pretrain(
     and the feedback carry to `checkpoints_feedback/` (so `resume` is exact with feedback too).
     """
     from mjx_protamer.agents.ddpg.train import make_train, resolve_devices
-    from mjx_protamer.experiments.env_factory import make_env
+    from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
 
+    config = with_resolved_backend(config)  # printed even without a progress bar: the run depends on it
     out = Path(out_dir)
     ckpt_dir = out / "checkpoints"
     config_path = out / CONFIG_NAME

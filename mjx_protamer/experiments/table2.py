@@ -93,9 +93,10 @@ def load_table2_config(path=None, overrides=None, seeds: int | None = None) -> T
 
 
 def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
-    from mjx_protamer.experiments.env_factory import make_env
+    from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
     from mjx_protamer.experiments.evaluate import eval_seed, evaluate
 
+    cfg = dataclasses.replace(cfg, pretrain=with_resolved_backend(cfg.pretrain, announce=progress))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     import yaml

@@ -1,0 +1,194 @@
+"""Native MuJoCo physics for a batch of self-touch worlds: `mujoco.batch.Batch`, host side (NumPy only).
+
+The native env (`native_env.py`) calls `NativePhysics.step` from inside its jitted step through
+`jax.pure_callback`; everything here is plain NumPy so that the JAX module stays free of host code.
+
+Stateless by design: a world's whole physics state is its float64 `mjSTATE_INTEGRATION` row
+(qpos, qvel, act, warm start, ctrl, time, ...), which the JAX side carries bit for bit as uint32 pairs
+(JAX on CPU runs float32). A call loads the rows into the batch, steps, and returns the new rows and the
+derived fields sensing reads. Because the callback keeps no state, JAX may replay or drop it freely
+(`pure_callback`), and the reset pool, auto-reset and NaN isolation stay ordinary array selects in JAX.
+Results are bit-identical to `mujoco.mj_step` on one `MjData` (the batch's promise), hence to the twin.
+
+Contacts come from MuJoCo contact sensors, one per self-contact pair of the model (a hand geom against
+a geom with a region), `num` slots each, sorted by penetration (`reduce="mindist"`): the batch cannot
+bind `d.contact` or `efc_force` (arena arrays), but it binds `sensordata`. Each slot gives found, the
+contact-frame force (its first component is the normal force, as `mj_contactForce` gives it), the
+penetration and the world position. The deepest `n_contacts` active slots of a world are returned,
+the MJX env's selection (`max_contact_points` deepest per condim group), with their geom pairs.
+The sensors are added to a copy of the model; they read the physics and never change it.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import mujoco
+import mujoco.batch
+import numpy as np
+
+from mjx_protamer.envs import body
+from mjx_protamer.envs.model import SelfTouchModel
+
+WORLDS_PER_THREAD = 32
+SLOTS_PER_PAIR = 2  # capsule-capsule pairs can touch at two points
+# Per slot: found (1), force in the contact frame (3), dist (1), pos (3).
+_SLOT_WIDTH = 8
+_BAD_STATE_WARNINGS = np.array([int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
+                                int(mujoco.mjtWarning.mjWARN_BADQACC)])
+STATE_SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
+
+
+def self_contact_pairs(m: mujoco.MjModel, model: SelfTouchModel) -> np.ndarray:
+    """(P, 2) geom ids of the model's explicit contact pairs that sensing can count (hand vs region)."""
+    hand = model.sensing.geom_hand
+    region = model.sensing.geom_region
+    pairs = []
+    for p in range(m.npair):
+        g1, g2 = int(m.pair_geom1[p]), int(m.pair_geom2[p])
+        if (hand[g1] >= 0 and region[g2] >= 0) or (hand[g2] >= 0 and region[g1] >= 0):
+            pairs.append((g1, g2))
+    return np.array(pairs, np.int32).reshape(-1, 2)
+
+
+def sensor_model(xml: str, geom_names: list[str], pairs: np.ndarray) -> mujoco.MjModel:
+    """The model with one contact sensor per self-contact pair appended (physics unchanged)."""
+    sensors = "".join(
+        f'<contact geom1="{geom_names[a]}" geom2="{geom_names[b]}" num="{SLOTS_PER_PAIR}" '
+        f'data="found force dist pos" reduce="mindist"/>' for a, b in pairs)
+    if "</mujoco>" not in xml:
+        raise ValueError("the model XML has no closing </mujoco> tag")
+    return mujoco.MjModel.from_xml_string(xml.replace("</mujoco>", f"<sensor>{sensors}</sensor>\n</mujoco>"))
+
+
+class NativePhysics:
+    """Steps batches of worlds given as state rows; one `mujoco.batch.Batch` per batch size, reused."""
+
+    def __init__(self, model: SelfTouchModel, physics_config, n_contacts: int, nthread: int = 0,
+                 action_smoothing: float = 0.0):
+        m0 = model.mj_model
+        names = [mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_GEOM, i) for i in range(m0.ngeom)]
+        self.pairs = self_contact_pairs(m0, model)
+        self.mj_model = sensor_model(body.infant_xml(physics_config), names, self.pairs)
+        m = self.mj_model
+        self.nstate = mujoco.mj_stateSize(m, STATE_SPEC)
+        self.n_slots = len(self.pairs) * SLOTS_PER_PAIR
+        self.n_contacts = min(n_contacts, self.n_slots) if n_contacts > 0 else self.n_slots
+        self.slot_geom = np.repeat(self.pairs, SLOTS_PER_PAIR, axis=0).astype(np.int32)  # (S, 2)
+        self.nthread = nthread or (os.cpu_count() or 1)
+        self._action_lo = model.ctrl_lo
+        self._action_hi = model.ctrl_hi
+        self._smoothing = action_smoothing  # model.next_ctrl's low-pass from action to servo target
+        self._batches: dict[int, mujoco.batch.Batch] = {}
+        self._lock = threading.Lock()
+        self._ctrl_slice = self._component(mujoco.mjtState.mjSTATE_CTRL)
+        self._qpos_slice = self._component(mujoco.mjtState.mjSTATE_QPOS)
+        self._qvel_slice = self._component(mujoco.mjtState.mjSTATE_QVEL)
+        self._warmstart_slice = self._component(mujoco.mjtState.mjSTATE_WARMSTART)
+        self._time_slice = self._component(mujoco.mjtState.mjSTATE_TIME)
+
+    def _component(self, spec) -> slice:
+        """Where one state component sits inside an mjSTATE_INTEGRATION row."""
+        m, offset, part = self.mj_model, 0, 1
+        while part <= int(STATE_SPEC):
+            if int(STATE_SPEC) & part:
+                size = mujoco.mj_stateSize(m, part)
+                if part == int(spec):
+                    return slice(offset, offset + size)
+                offset += size
+            part <<= 1
+        raise ValueError(f"state component {spec} is not part of the integration state")
+
+    # --- state rows --------------------------------------------------------------------------------
+    def state_rows(self, qpos, qvel, ctrl, warmstart) -> np.ndarray:
+        """(n, nstate) float64 rows from per-world arrays (time and act zero, as after mj_resetData)."""
+        qpos, qvel, ctrl, warmstart = (np.atleast_2d(np.asarray(x, np.float64)) for x in (qpos, qvel, ctrl, warmstart))
+        rows = np.zeros((qpos.shape[0], self.nstate))
+        d = mujoco.MjData(self.mj_model)
+        for i in range(qpos.shape[0]):
+            mujoco.mj_resetData(self.mj_model, d)
+            d.qpos[:], d.qvel[:], d.ctrl[:], d.qacc_warmstart[:] = qpos[i], qvel[i], ctrl[i], warmstart[i]
+            mujoco.mj_getState(self.mj_model, d, rows[i], STATE_SPEC)
+        return rows
+
+    def rows_to_bits(self, rows: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(rows, np.float64).view(np.uint32)
+
+    def bits_to_rows(self, bits: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(bits, np.uint32).view(np.float64)
+
+    # --- the calls -----------------------------------------------------------------------------------
+    def _batch(self, n: int) -> mujoco.batch.Batch:
+        b = self._batches.get(n)
+        if b is None:
+            # A thread pays off from about 32 worlds: below that, waking it costs more than it saves
+            # (measured: 16 worlds step faster on one thread than on two).
+            b = mujoco.batch.Batch(self.mj_model, n, max(1, min(self.nthread, n // WORLDS_PER_THREAD)))
+            for name in ("geom_xpos", "geom_xmat", "actuator_force", "sensordata"):
+                b.bind(name)
+            self._batches[n] = b
+        return b
+
+    def step(self, bits: np.ndarray, action: np.ndarray):
+        """One physics step of each world: `bits` (..., 2 nstate) uint32 rows, `action` (..., nu) in [-1, 1].
+
+        The action becomes position targets here, in float64, exactly as the twin computes them.
+        Returns (state bits, packed float32 fields (see `FIELDS`), contact geom pairs, bad) for the
+        stepped worlds; `bad` marks worlds whose state diverged (MuJoCo's bad-state warnings rose,
+        non-finite state, or a simulation error).
+        """
+        lead = bits.shape[:-1]
+        rows = self.bits_to_rows(bits.reshape(-1, bits.shape[-1]))
+        a = np.clip(np.asarray(action, np.float64).reshape(rows.shape[0], -1), -1.0, 1.0)
+        with self._lock:
+            b = self._batch(rows.shape[0])
+            b.state[:] = rows
+            target = self._action_lo + 0.5 * (a + 1.0) * (self._action_hi - self._action_lo)
+            b.state[:, self._ctrl_slice] = self._smoothing * rows[:, self._ctrl_slice] + (1.0 - self._smoothing) * target
+            before = b.warning[:, _BAD_STATE_WARNINGS, 1].sum(axis=1)
+            failed = np.zeros(rows.shape[0], bool)
+            try:
+                b.step()
+            except mujoco.batch.SimulationError as e:
+                failed[np.asarray(e.ids)] = True
+            bad = failed | (b.warning[:, _BAD_STATE_WARNINGS, 1].sum(axis=1) != before)
+            out = self._outputs(b)
+        bad |= ~np.isfinite(out[1]).all(axis=1)
+        return tuple(x.reshape(lead + x.shape[1:]) for x in out + (bad,))
+
+    def forward(self, rows: np.ndarray):
+        """`mj_forward` of each row (positions, contacts, forces at that state); outputs as `step`'s."""
+        rows = np.atleast_2d(rows)
+        with self._lock:
+            b = self._batch(rows.shape[0])
+            b.state[:] = rows
+            b.forward()
+            return self._outputs(b)
+
+    def fields(self) -> tuple[tuple[str, tuple[int, ...]], ...]:
+        """Name and per-world shape of each float32 field packed by `step`, in order."""
+        m, c = self.mj_model, self.n_contacts
+        return (("time", ()), ("qpos", (m.nq,)), ("qvel", (m.nv,)), ("actuator_force", (m.nu,)), ("geom_xpos", (m.ngeom, 3)),
+                ("geom_xmat", (m.ngeom, 3, 3)), ("contact_pos", (c, 3)), ("contact_dist", (c,)),
+                ("contact_force", (c,)))
+
+    def _outputs(self, b: mujoco.batch.Batch):
+        """(state bits, the float fields packed in one float32 row per world, contact geom pairs).
+
+        Copies: the batch overwrites its outputs on the next call. One packed array instead of eight
+        keeps the per-call overhead of the callback small (it matters for a single env).
+        """
+        n = b.nsim
+        state = b.state.copy()
+        slots = b.sensordata.reshape(n, self.n_slots, _SLOT_WIDTH)
+        # An empty slot is all zeros: penetration 0, which sensing counts as no contact (dist < 0 is
+        # a contact), and which sorts after every real contact.
+        dist = slots[:, :, 4]
+        order = np.argsort(dist, axis=1, kind="stable")[:, : self.n_contacts]
+        pick = np.take_along_axis(slots, order[:, :, None], axis=1)
+        packed = np.concatenate([
+            state[:, self._time_slice], state[:, self._qpos_slice], state[:, self._qvel_slice], b.actuator_force,
+            b.geom_xpos.reshape(n, -1), b.geom_xmat.reshape(n, -1),
+            pick[:, :, 5:8].reshape(n, -1), pick[:, :, 4], pick[:, :, 1]], axis=1).astype(np.float32)
+        return state.view(np.uint32), packed, self.slot_geom[order]
