@@ -173,7 +173,7 @@ def test_config_errors_name_the_field(tmp_path):
     path = tmp_path / "env.yaml"
     path.write_text("k: 6\nreward:\n  energy: 0.0\n")
     cfg = load_config(EnvConfig, path)
-    assert cfg.k == 6 and cfg.observation_size == 4 * 9 + 32 and cfg.reward.weights()[4] == 0.0
+    assert cfg.k == 6 and cfg.observation_size == 4 * 9 + 32 + 2 and cfg.reward.weights()[4] == 0.0  # + oscillator
 
 
 def test_body_model_facts(model):
