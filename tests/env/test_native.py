@@ -28,7 +28,9 @@ def native_env():
     from mjx_protamer.envs.config import EnvConfig
     from mjx_protamer.envs.native_env import NativeSelfTouchEnv
 
-    return NativeSelfTouchEnv(EnvConfig(reset_noise_steps=0))
+    # A short action filter (20 ms): the low-pass is exercised on every step, and held random targets are
+    # still reached within their 25 steps, so the trajectory makes enough self-contacts to compare.
+    return NativeSelfTouchEnv(EnvConfig(reset_noise_steps=0, action_filter_s=0.02))
 
 
 def _held_actions(seed, steps, hold=25):
@@ -94,7 +96,7 @@ def native_roll(native_env):
     return lambda rng, actions: jax.tree.map(np.asarray, roll(rng, actions))
 
 
-@pytest.mark.parametrize("seed", [0, 3])
+@pytest.mark.parametrize("seed", [3, 5])  # held-target sequences that make contact through the 20 ms filter
 def test_trajectory_equals_the_twin(native_env, native_roll, seed):
     """150 held-random-action steps from the settled start (shipping solver settings), through the jitted
     env: qpos equal to float32 rounding of the same float64 trajectory; proprioception to 1e-5, touch
@@ -219,7 +221,7 @@ def test_episode_limit_truncates_and_auto_resets(batched_native):
 
     env, reset, step = batched_native
     state = reset(jax.random.split(jax.random.PRNGKey(1), 2))
-    assert state.obs.shape == (2, 84)
+    assert state.obs.shape == (2, env.observation_size) == (2, 86)  # 84 + the oscillator
     for _ in range(3):
         state = step(state, jnp.ones((2, 14)) * 0.3)
     assert state.done.tolist() == [1.0, 1.0] and state.info["truncation"].tolist() == [1.0, 1.0]
