@@ -35,6 +35,8 @@ def register(subparsers) -> None:
     t.add_argument("--backend", choices=("auto", "mjx", "native"), default=None,
                    help="physics backend (the same as --set pretrain.env.backend=...); auto picks native MuJoCo "
                    "on a CPU, MJX on an accelerator")
+    t.add_argument("--resume", action="store_true",
+                   help="continue the run in --out: conditions already finished there are kept, not retrained")
     t.add_argument("--quiet", action="store_true", help="no per-chunk progress lines")
     t.set_defaults(handler=_table2)
 
@@ -46,11 +48,14 @@ def _table2(args: argparse.Namespace) -> int:
     overrides = list(args.overrides) + ([f"pretrain.env.backend={args.backend}"] if args.backend else [])
     cfg = load_table2_config(args.config, overrides, args.seeds)
     _enable_compile_cache()
+    if args.resume and args.out is None:
+        from mjx_protamer.config import ConfigError
+        raise ConfigError("--resume needs --out: the directory of the table2 run to continue")
     out = args.out or Path("runs") / time.strftime("table2-%Y%m%d-%H%M%S")
     from mjx_protamer.experiments.table2 import run_table2
 
     with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
-        result = run_table2(cfg, out, progress=not args.quiet)
+        result = run_table2(cfg, out, progress=not args.quiet, resume=args.resume)
     print(Path(result["table_md"]).read_text())
     for key in ("table_md", "table_json", "figure1", "figure2", "training_csv"):
         print(f"{key:<13} {result[key]}")

@@ -94,10 +94,11 @@ def step_dir(mngr: ocp.CheckpointManager, step: int) -> Path:
     return Path(mngr.directory) / str(step)
 
 
-def _write_atomic(path: Path, text: str) -> None:
+def write_atomic(path: Path, data: str | bytes) -> None:
+    """Write a file so that a kill at any moment leaves the old or the new content, never a torn one."""
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text)
+    with open(tmp, "wb") as fh:
+        fh.write(data.encode() if isinstance(data, str) else data)
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
@@ -114,7 +115,7 @@ def save(mngr: ocp.CheckpointManager, step: int, state) -> None:
     mngr.wait_until_finished()
     host = {name: np.asarray(jax.device_get(x)) for name, x in named.items()}
     manifest = {"format": FORMAT, "step": int(step), "leaves": _describe(host), "sha256": _digest(host)}
-    _write_atomic(step_dir(mngr, step) / MANIFEST, json.dumps(manifest, indent=1))
+    write_atomic(step_dir(mngr, step) / MANIFEST, json.dumps(manifest, indent=1))
 
 
 def _read_manifest(directory: Path) -> dict:

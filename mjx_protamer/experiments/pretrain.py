@@ -75,10 +75,10 @@ def run_pretrain(
                       other=None if fb_state is None else fb_state)
     out.mkdir(parents=True, exist_ok=True)
     mngr = checkpoints.manager(ckpt_dir)
-    _atomic_write(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
+    checkpoints.write_atomic(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
     if fb is not None:
         fb_mngr = checkpoints.manager(out / "checkpoints_feedback")
-        _atomic_write(out / "feedback_config.yaml", yaml.safe_dump(
+        checkpoints.write_atomic(out / "feedback_config.yaml", yaml.safe_dump(
             {"kind": feedback.kind, "feedback": to_dict(feedback.config), "batched": to_dict(feedback.batched)},
             sort_keys=False).encode())
     state = trainer.init(jax.random.PRNGKey(tc.seed))
@@ -152,7 +152,7 @@ def run_pretrain(
 
         fb_log.note(event="end", chunk=chunk, totals=[float(x) for x in jax.device_get(fb_state.totals)])
         fb_log.close()
-        _atomic_write(out / "reward_model.msgpack", reward_model_bytes(fb_state))
+        checkpoints.write_atomic(out / "reward_model.msgpack", reward_model_bytes(fb_state))
         fb_mngr.close()
 
     result = {
@@ -219,15 +219,6 @@ class FeedbackSetup:
         self.kind, self.config, self.batched = kind, config, batched or BatchedFeedbackConfig()
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    import os
-
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 def _truncate_feedback_log(path: Path, last_step: int) -> None:
@@ -240,4 +231,4 @@ def _truncate_feedback_log(path: Path, last_step: int) -> None:
     from mjx_protamer.human.queue import FeedbackLog
 
     keep = [r for r in FeedbackLog.records(path) if r.get("step") is None or r["step"] < last_step]
-    _atomic_write(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in keep).encode())
+    checkpoints.write_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in keep).encode())

@@ -92,16 +92,27 @@ def load_table2_config(path=None, overrides=None, seeds: int | None = None) -> T
     return from_dict(Table2Config, raw)
 
 
-def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
+def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False) -> dict:
+    """Every condition's results are written atomically as it finishes (`condition_<name>.json`): a run
+    killed at any moment loses at most the condition it was training, and `resume` continues it."""
+    from mjx_protamer.experiments.checkpoints import write_atomic
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
-    from mjx_protamer.experiments.evaluate import eval_seed, evaluate
 
     cfg = dataclasses.replace(cfg, pretrain=with_resolved_backend(cfg.pretrain, announce=progress))
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     import yaml
 
-    (out / "config.yaml").write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+    saved = yaml.safe_dump(to_dict(cfg), sort_keys=False)
+    done = {c.name: out / f"condition_{c.name}.json" for c in cfg.conditions}
+    if resume:
+        if not (out / "config.yaml").is_file():
+            raise ConfigError(f"--resume: {out} holds no table2 run to continue; leave out --resume to start one there")
+        if (out / "config.yaml").read_text() != saved:
+            raise ConfigError(f"--resume: the config differs from the one saved in {out / 'config.yaml'}")
+    elif any(p.is_file() for p in done.values()):
+        raise ConfigError(f"{out} already holds a table2 run; pass --resume to continue it, or another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "config.yaml", saved)
     pre = cfg.pretrain
     tc = pre.train
     env = make_env(pre)
@@ -118,6 +129,14 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
     chunk_fn = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)), donate_argnums=(0, 1))
     untrained = init_feedback(seeds).rm_params
     for cond in cfg.conditions:
+        if done[cond.name].is_file():  # finished before an interruption (resume)
+            kept = json.loads(done[cond.name].read_text())
+            training += kept["training"]
+            evals[cond.name] = {int(k): v for k, v in kept["evals"].items()}
+            wall[cond.name].append(kept["train_wall_s"])
+            if progress:
+                print(f"[{cond.name}] kept from {done[cond.name]}", flush=True)
+            continue
         kind = None if cond.channel == "none" else cond.channel
         credit = dataclasses.replace(cfg.feedback.credit, scheme=cond.credit)
         t0 = time.perf_counter()
@@ -147,13 +166,16 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True) -> dict:
                                                    "credited_rows_total", "rm_updates_total", "r_hat_score_corr")}
             ev["train_wall_s"] = train_s
             evals[cond.name][seed] = ev
-            (out / f"eval_{cond.name}_seed{seed}.json").write_text(json.dumps(ev, indent=2))
+            write_atomic(out / f"eval_{cond.name}_seed{seed}.json", json.dumps(ev, indent=2))
         wall[cond.name].append(train_s)
+        write_atomic(done[cond.name], json.dumps({
+            "training": [r for r in training if r["condition"] == cond.name], "train_wall_s": train_s,
+            "evals": {str(k): v for k, v in evals[cond.name].items()}}))
     total_s = time.perf_counter() - t_all
     _write_training_csv(training, out / "training.csv")
     summary = _summarize(cfg, evals, wall, total_s)
-    (out / "table2.json").write_text(json.dumps(summary, indent=2))
-    (out / "table2.md").write_text(format_markdown(summary))
+    write_atomic(out / "table2.json", json.dumps(summary, indent=2))
+    write_atomic(out / "table2.md", format_markdown(summary))
     fig1 = plot_training(training, cfg, out / "figure1_training_reward.png")
     fig2 = plot_regions(summary, out / "figure2_unique_regions.png")
     from mjx_protamer.view.bodymap import write_condition_body_maps  # body_map_<condition>.png

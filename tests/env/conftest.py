@@ -68,8 +68,14 @@ def eq_mjx_evaluate(eq_mjx_env):
     return call
 
 
+@pytest.fixture(scope="session")
+def trajectory_fn():
+    """The jitted trajectory of any env on the env contract (MJX or native), as `_trajectory_fn`."""
+    return _trajectory_fn
+
+
 def _trajectory_fn(env):
-    """Jitted: (reset key, actions (T, 14)) -> per-step obs, qpos, reward, region masks of the MJX env."""
+    """Jitted: (reset key, actions (T, 14)) -> per-step obs, qpos, reward, region masks, NaN resets."""
     import jax
 
     @jax.jit

@@ -79,21 +79,9 @@ def test_contact_sensors_give_mujocos_contacts(native_env):
 
 
 @pytest.fixture(scope="module")
-def native_roll(native_env):
+def native_roll(native_env, trajectory_fn):
     """Jitted: (reset key, actions (T, 14)) -> per-step obs, qpos, reward, region masks, nan resets."""
-    import jax
-
-    env = native_env
-
-    @jax.jit
-    def roll(rng, actions):
-        def body(s, a):
-            s = env.step(s, a)
-            return s, (s.obs, s.data.qpos, s.reward, s.metrics["region_mask"], s.metrics["nan_reset"])
-        state = env.reset(rng)
-        return state.obs, jax.lax.scan(body, state, actions)[1]
-
-    return lambda rng, actions: jax.tree.map(np.asarray, roll(rng, actions))
+    return trajectory_fn(native_env)
 
 
 @pytest.mark.parametrize("seed", [3, 5])  # held-target sequences that make contact through the 20 ms filter

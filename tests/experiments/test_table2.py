@@ -43,6 +43,22 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     assert all(c[n]["feedback"]["feedback_total"] > 0 for n in ("DTK", "DTW", "DTP"))
     assert len(c["DTK"]["unique_regions"]["per_episode"]) == 6
     assert c["DTP"]["paper"]["contact_rate"] == 0.915
+    # a run killed after two conditions: --resume keeps what finished and redoes the rest, to the same table
+    kept = (out / "condition_DTK.json").read_bytes()
+    for name in ("condition_DTW.json", "condition_DTP.json", "table2.json"):
+        (out / name).unlink()
+    assert main(["reproduce", "table2", "--config", str(cfg), "--seeds", "2", "--out", str(out), "--quiet"]) == 2
+    assert "already holds a table2 run; pass --resume" in capsys.readouterr().err
+    assert main(["reproduce", "table2", "--config", str(cfg), "--seeds", "2", "--out", str(out), "--quiet",
+                 "--resume"]) == 0
+    resumed = json.loads((out / "table2.json").read_text())["conditions"]
+    assert (out / "condition_DTK.json").read_bytes() == kept
+    for n in c:
+        assert resumed[n]["unique_regions"]["per_episode"] == c[n]["unique_regions"]["per_episode"], n
+        assert resumed[n]["freeze_ratio"]["seed_values"] == c[n]["freeze_ratio"]["seed_values"], n
+    assert main(["reproduce", "table2", "--config", str(cfg), "--seeds", "3", "--out", str(out), "--quiet",
+                 "--resume"]) == 2
+    assert "the config differs" in capsys.readouterr().err
     # the same seed gives the same DDPG run: seeds fix everything
     out2 = tmp_path / "again"
     assert main(["reproduce", "table2", "--config", str(cfg), "--seeds", "1", "--out", str(out2), "--quiet",
