@@ -229,7 +229,7 @@ def test_episode_limit_truncates_and_auto_resets(batched):
 
     env, _, reset, step = batched
     state = reset(jax.random.split(jax.random.PRNGKey(1), 2))
-    assert state.obs.shape == (2, env.observation_size) == (2, 84)
+    assert state.obs.shape == (2, env.observation_size) == (2, 84 + 2)  # + the oscillator's phase
     actions = jnp.ones((2, 14)) * 0.3
     for t in range(3):
         state = step(state, actions)

@@ -186,7 +186,7 @@ def test_state_touching_with_all_four_hand_geoms(eq_twin, eq_mjx_evaluate, sweep
               "s_qpos": slice(4 * BLOCK, 4 * BLOCK + 12), "s_qvel": slice(4 * BLOCK + 12, 4 * BLOCK + 24),
               "s_torque": slice(4 * BLOCK + 24, 4 * BLOCK + 32)}
     for side, obs in (("native", nat["obs"]), ("mjx", mx["obs"])):
-        assert obs.shape == (84,)
+        assert obs.shape == (84 + 2,)  # the paper's 84, then the oscillator's phase
         for name, sl in blocks.items():
             assert np.any(obs[sl] != 0), f"{side}: observation block {name} is all zeros"
             if "palm" in name or "fingers" in name:
