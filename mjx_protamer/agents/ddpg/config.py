@@ -72,7 +72,7 @@ class TrainConfig:
     seed: int = 0
     num_envs: int = 32
     episode_length: int = 1000
-    total_env_steps: int = 64_000  # over all envs; rounded up to whole chunks
+    total_env_steps: int = 256_000  # over all envs; rounded up to whole chunks
     warmup_env_steps: int = 4_000  # uniform random actions, no updates, before learning starts
     updates_per_step: int = 2  # gradient updates per vectorised env step (one step of every env)
     stagger_episodes: bool = True  # random initial episode clocks, so a batch of envs does not reset in lockstep
