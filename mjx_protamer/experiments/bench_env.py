@@ -75,6 +75,16 @@ def _timed(fn, repeats: int) -> tuple[float, list[float]]:
 
 
 # --- MJX ---------------------------------------------------------------------------------------------
+def _env_sweep(backend: str, env, sizes, steps: int, repeats: int) -> dict:
+    """`<backend>_env_steps_per_s` and `<backend>_env_compile_s`, keyed by batch size."""
+    out: dict = {f"{backend}_env_steps_per_s": {}, f"{backend}_env_compile_s": {}}
+    for b in sizes:
+        r = _bench_env(env, b, steps, repeats)
+        out[f"{backend}_env_steps_per_s"][str(b)] = r["steps_per_s"]
+        out[f"{backend}_env_compile_s"][str(b)] = r["compile_s"]
+    return out
+
+
 def _bench_env(env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
     import jax
 
@@ -326,11 +336,7 @@ def run_env_benchmark(args) -> dict:
 
     loadavg_start = os.getloadavg()
     env = SelfTouchEnv()
-    report: dict = {"mjx_env_steps_per_s": {}, "mjx_env_compile_s": {}}
-    for b in sizes:
-        r = _bench_env(env, b, steps, repeats)
-        report["mjx_env_steps_per_s"][str(b)] = r["steps_per_s"]
-        report["mjx_env_compile_s"][str(b)] = r["compile_s"]
+    report: dict = _env_sweep("mjx", env, sizes, steps, repeats)
     phys = _bench_mjx_physics(env, physics_batch, steps, repeats)
     report["mjx_physics_steps_per_s"] = phys["steps_per_s"]
     report["mjx_physics_compile_s"] = phys["compile_s"]
@@ -348,11 +354,7 @@ def run_env_benchmark(args) -> dict:
     from mjx_protamer.envs.native_env import NativeSelfTouchEnv
 
     native_env = NativeSelfTouchEnv(env.config)
-    report.update(native_env_steps_per_s={}, native_env_compile_s={})
-    for b in sizes:
-        r = _bench_env(native_env, b, steps, repeats)
-        report["native_env_steps_per_s"][str(b)] = r["steps_per_s"]
-        report["native_env_compile_s"][str(b)] = r["compile_s"]
+    report.update(_env_sweep("native", native_env, sizes, steps, repeats))
     batch_phys = _bench_native_batch_physics(native_env, physics_batch, steps, repeats)
     report["native_batch_physics_steps_per_s"] = batch_phys["steps_per_s"]
     report["native_batch_physics_threads"] = batch_phys["nthread"]
