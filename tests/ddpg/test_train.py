@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import jax
@@ -134,3 +135,19 @@ def test_checkpoint_roundtrip_keeps_zero_size_leaves(tmp_path):
     assert back["empty"].shape == (0, 4)
     np.testing.assert_array_equal(back["a"], tree["a"])
     assert back["n"]["k"].dtype == jnp.int32
+
+
+def test_quiet_envs_act_with_the_deterministic_actor():
+    """`noise.quiet_fraction` 0.5 of 4 envs: envs 2 and 3 store exactly the deterministic actor's action, envs
+    0 and 1 the actor's action plus noise (the replay rows of iteration i are i * 4 + env)."""
+    config = tiny_config(total_env_steps=200, warmup_env_steps=4, updates_per_step=0)
+    config = dataclasses.replace(config, ddpg=dataclasses.replace(
+        config.ddpg, noise=dataclasses.replace(config.ddpg.noise, quiet_fraction=0.5)))
+    trainer = make_train(config, PointReachEnv())
+    state, _ = trainer.train_chunk(trainer.init(jax.random.PRNGKey(0)), None)
+    rows = np.arange(4, 200).reshape(-1, 4)  # after the one warm-up iteration
+    obs, action = np.asarray(state.replay.data.obs), np.asarray(state.replay.data.action)
+    greedy = np.clip(np.asarray(trainer.act(state.actor_params, jnp.asarray(obs))), -1, 1)
+    gap = np.abs(action - greedy).max(axis=-1)[rows]  # (iterations, envs)
+    assert gap[:, 2:].max() < 1e-6  # the same actor, up to float rounding of a different batch shape
+    assert gap[:, :2].min() > 1e-3

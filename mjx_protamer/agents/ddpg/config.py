@@ -25,10 +25,18 @@ class NoiseConfig:
     theta: float = 0.15
     sigma: float = 0.6  # for "gaussian": the std of the independent per-step noise
     mu: float = 0.0
+    # The last `quiet_fraction` of the envs act with the deterministic actor (no noise added). A policy
+    # trained only on noisy behaviour is judged on states its critic never saw: the deterministic actor of
+    # the self-touch env froze once the noise was off (issue 8). Quiet envs put the test policy's own states
+    # and their returns into the replay (like Ape-X's per-actor exploration levels), and let a simulated
+    # teacher judge the behaviour the test measures.
+    quiet_fraction: float = 0.0
 
     def validate(self) -> None:
         check(0.0 < self.theta <= 1.0, "theta", f"must be in (0, 1], got {self.theta}")
         check(self.sigma >= 0.0, "sigma", f"must be >= 0, got {self.sigma}")
+        check(0.0 <= self.quiet_fraction < 1.0, "quiet_fraction",
+              f"must be in [0, 1) (the share of envs acting without noise), got {self.quiet_fraction}")
 
 
 @dataclass(frozen=True)

@@ -128,6 +128,8 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
     actor_opt = optax.adam(dc.actor_lr)
     critic_opt = optax.adam(dc.critic_lr)
     warmup_iterations = tc.warmup_iterations
+    # Envs from index `noisy_envs` on act with the deterministic actor (`noise.quiet_fraction`).
+    noisy_envs = tc.num_envs - int(round(dc.noise.quiet_fraction * tc.num_envs))
 
     def local_key(key):
         """Per-device randomness (env resets, noise, minibatches); the carried key stays replicated."""
@@ -206,7 +208,9 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         """Act on every env (random during warm-up, else actor + noise), step, store the transitions."""
         obs = ts.env_state.obs
         noise_state = noise.step(dc.noise, ts.noise_state, local_key(k_noise))
-        explore = jnp.clip(actor.apply(ts.actor_params, obs) + noise_state, -1.0, 1.0)
+        first = jax.lax.axis_index(axis) * local_envs if sharded else 0
+        noisy = (first + jnp.arange(local_envs) < noisy_envs)[:, None]
+        explore = jnp.clip(actor.apply(ts.actor_params, obs) + jnp.where(noisy, noise_state, 0.0), -1.0, 1.0)
         uniform = jax.random.uniform(local_key(k_random), explore.shape, minval=-1.0, maxval=1.0)
         action = jnp.where(ts.iteration < warmup_iterations, uniform, explore)
 
