@@ -11,7 +11,7 @@ Shaped like PureJaxRL. `make_train(config, env)` returns pure functions:
   scan's per-iteration `replay.Transition`s, (chunk_steps, num_envs, ...), in the order they were stepped
   (PureJaxRL's trajectory). `train_chunk` is this function with the transitions dropped: XLA removes the
   unused stacked outputs (the compiled temp and output sizes are those of a chunk that never emits them,
-  checked in tests/ddpg/test_parts.py), so nobody pays for them unless they ask;
+  checked in tests/ddpg/test_train.py), so nobody pays for them unless they ask;
 - `chunk_body`: `collect_chunk` before jit and shard_map (the per-device body over axis `AXIS`, with
   `state_specs`), for callers that add work inside the same program (the feedback path);
 - `train(rng, human_params=None) -> (train_state, metrics per chunk)`: init and every chunk in one pure
