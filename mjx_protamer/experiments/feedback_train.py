@@ -2,23 +2,32 @@
 
 `make_feedback_train(config, env, feedback, batched)` wraps the DDPG trainer's chunk:
 
-1. the DDPG chunk (`chunk_steps` vectorised steps under `lax.scan`) with the human reward
-   `gain * r_hat(params, s, a)` relabelled at sample time (`gain` 0 is DDPG alone, bit for bit the same
-   reward; the reward-model params are an argument: no recompile when they change);
-2. the chunk's steps of every env are read back from the replay rows it wrote
-   (row `ptr + i * num_envs + b` for iteration i, env b); the teacher signals are reward terms by name
-   (or `obs:i` / `action:i`);
-3. one simulated teacher per env (`teachers.batched_teacher`, on the same core as the host teacher) scores the
+1. the DDPG chunk (`chunk_steps` vectorised steps under `lax.scan`, `Trainer.chunk_body`) with the human
+   reward `gain * r_hat(params, s, a)` relabelled at sample time (`gain` 0 is DDPG alone, bit for bit the same
+   reward; the reward-model params are an argument: no recompile when they change). Its scan emits the
+   chunk's transitions, (T, B, ...) in stepping order; the teacher signals are reward terms by name (or
+   `obs:i` / `action:i` / `obs_norm:...`) of those steps;
+2. one simulated teacher per env (`teachers.batched_teacher`, on the same core as the host teacher) scores the
    steps; feedback reaches the learner at arrival step = judged step + (reaction delay + utterance +
    processing latency) / dt, through a pending ring;
-4. credit by lag from the arrival step (`credit.lag_weights`: by default the channel's reaction-delay
+3. credit by lag from the arrival step (`credit.lag_weights`: by default the channel's reaction-delay
    distribution; the authors' 15-step window and Deep TAMER's Uniform[0.2, 4.0] s stay selectable): for
-   each event `rows_per_event` lags are drawn in proportion to their credit weight (a Monte-Carlo estimate of the weighted loss: a time window spans 760 steps at 200 Hz) and
-   the (obs, action) of those steps are gathered *from the DDPG replay*, so windows reaching into earlier
-   chunks are credited too (up to replay capacity / num_envs steps back);
-5. the rows go to the device feedback ring (1e4 rows, `batched.ring_add`) and the reward model takes
+   each event `rows_per_event` lags are drawn in proportion to their credit weight (a Monte-Carlo estimate of
+   the weighted loss: a time window spans 760 steps at 200 Hz, `batched.draw_credited_steps`). A window
+   reaches back into earlier chunks: the (obs, action) of the last H = lag_len - 1 steps of every env are
+   carried in `FeedbackState.history` (H, B, ...), so a credited step is read from the history or from the
+   chunk's own transitions, never from the DDPG replay;
+4. the rows go to the device feedback ring (1e4 rows, `batched.ring_add`) and the reward model takes
    `updates_per_feedback` minibatch steps on the chunk's new rows plus `chunk_steps // replay_every`
-   replay minibatches (weighted squared loss, Adam).
+   replay minibatches (weighted squared loss, Adam, `batched.reward_model_updates`).
+
+Devices: the feedback chunk runs on the DDPG trainer's mesh, inside one `shard_map` over the env axis
+("data"). Per env (split over devices): the env batch, its teacher and pending ring, the credit history.
+Replicated: the reward model, its optimiser and feedback ring. Each device draws its own events' credited
+rows; the rows are all-gathered, and every device then makes the same reward-model updates on the same rows
+with the same key, so the replicas stay equal without any gradient averaging (the reward model is small:
+redundant updates cost less than a second protocol). `max_events_per_chunk` is per device. On one device
+there is no gather and the program is the single-device one.
 
 The channel (keyboard / prosody / speech), the credit weights and the gain are *values*
 (`FeedbackParams`), so the four conditions of Table II, and every `--feedback simulated:KIND`, share one
@@ -37,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 from flax import struct
+from jax.sharding import PartitionSpec as P
 
 from mjx_protamer.config import ConfigError, check
 from mjx_protamer.human.batched import FeedbackRing, draw_credited_steps, reward_model_updates, ring_add, ring_init
@@ -88,6 +98,13 @@ class FeedbackParams(NamedTuple):
     lag_w: jax.Array  # (L,) credit weight of lag j from the arrival step
 
 
+class CreditHistory(NamedTuple):
+    """The (obs, action) of every env's last H steps, oldest first: what credit windows reaching back past the
+    chunk's first step read. H = the longest compiled credit window less one (`FeedbackTrainer.history_len`)."""
+    obs: jax.Array  # (H, B, obs)
+    action: jax.Array  # (H, B, act)
+
+
 @struct.dataclass
 class FeedbackState:
     teacher: BatchedTeacherState  # one teacher per env and its pending ring of feedback not yet arrived
@@ -96,6 +113,7 @@ class FeedbackState:
     ring: FeedbackRing
     rng: jax.Array
     totals: jax.Array  # (5,) float: events, positive, negative, credited rows, reward-model updates
+    history: CreditHistory
 
 
 TOTAL_NAMES = ("feedback_total", "feedback_pos_total", "feedback_neg_total", "credited_rows_total", "rm_updates_total")
@@ -109,8 +127,9 @@ class FeedbackTrainer(NamedTuple):
     lag_len: int
     max_events: int
     apply: Any  # r_hat(params, obs, action)
-    chunk_fn: Any  # `chunk` before jit, to vmap over seeds
+    chunk_fn: Any  # `chunk` before jit (shard_mapped over the mesh when sharded), to vmap over seeds
     signals: Any  # (obs, action, reward_terms) (..., dims) -> (..., C) the teacher rule's signals
+    history_len: int  # H: steps of (obs, action) per env carried for credit into earlier chunks
 
 
 def _signal_columns(names, term_names, obs_size, act_size):
@@ -140,14 +159,17 @@ def rule_signals(cols, obs, action, terms):
 
 def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | None = None) -> FeedbackTrainer:
     """`config` a PretrainConfig, `feedback` a FeedbackConfig (teacher rule, reward model, credit, dt)."""
-    from mjx_protamer.agents.ddpg.train import make_train
+    from mjx_protamer.agents.ddpg.train import AXIS, make_train
 
     batched = batched or BatchedFeedbackConfig()
     tc, fc = config.train, feedback
     B, T = tc.num_envs, tc.chunk_steps
     rmc = fc.reward_model
     hidden = tuple(rmc.hidden)
-    trainer = make_train(config, env, human_reward_fn=human_reward(hidden), devices=jax.devices()[:1])
+    trainer = make_train(config, env, human_reward_fn=human_reward(hidden))
+    n_dev = trainer.num_devices
+    sharded = trainer.mesh is not None
+    local_B = B // n_dev
     apply = reward_fn(hidden)
     net = RewardMLP(hidden)
     opt = optax.adam(rmc.learning_rate)
@@ -158,6 +180,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     kind_cfgs = [with_channel(fc.teacher, k) for k in KINDS]
     L = max(len(lag_weights(dataclasses.replace(fc.credit, scheme=s), dt, c.channel))
             for s in ("channel", "step_window", "time_window") for c in kind_cfgs)
+    H = max(L - 1, 1)  # lag j <= L - 1 from an arrival at the chunk's first step reaches L - 1 steps back
     teach_envs = batched.teach_envs or B
     if teach_envs > B:
         raise ConfigError(f"config field 'batched.teach_envs': {teach_envs} > train.num_envs ({B})")
@@ -167,10 +190,6 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         else batched.replay_updates_per_chunk
     n_fresh = rmc.updates_per_feedback * -(-E // 3) if batched.fresh_updates_per_chunk < 0 \
         else batched.fresh_updates_per_chunk
-    cap = config.ddpg.replay_size
-    if cap < T * B:
-        raise ConfigError(f"config field 'ddpg.replay_size': {cap} rows cannot hold one chunk ({T} x {B} envs)")
-    back_limit = cap // B - T  # steps before the chunk still in the replay
 
     def params_for(kind: str | None, credit: CreditConfig) -> FeedbackParams:
         w = np.zeros((L,), np.float32)
@@ -189,51 +208,65 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         p = net.init(k_net, jnp.zeros((1, obs_size)), jnp.zeros((1, act_size)))
         return FeedbackState(
             teacher=batched_teacher_init(kind_cfgs, B, dt), rm_params=p, rm_opt_state=opt.init(p),
-            ring=ring_init(rmc.buffer_size, obs_size, act_size), rng=k_run, totals=jnp.zeros((5,)))
+            ring=ring_init(rmc.buffer_size, obs_size, act_size), rng=k_run, totals=jnp.zeros((5,)),
+            history=CreditHistory(jnp.zeros((H, B, obs_size)), jnp.zeros((H, B, act_size))))
+
+    # Per-env work runs on each device's envs; these join the devices where the replicated parts need all.
+    def local_key(key):
+        return jax.random.fold_in(key, jax.lax.axis_index(AXIS)) if sharded else key
+
+    def psum(x):
+        return jax.lax.psum(x, AXIS) if sharded else x
+
+    def gather(x, axis=0):  # the devices' pieces, concatenated in device (= global env) order
+        return jax.lax.all_gather(x, AXIS, axis=axis, tiled=True) if sharded else x
 
     def chunk(ts, fs: FeedbackState, fp: FeedbackParams):
-        ptr0, it0 = ts.replay.ptr, ts.iteration
+        it0 = ts.iteration
         hp = {"params": fs.rm_params, "gain": fp.gain}
-        ts, metrics = trainer.train_chunk(ts, hp)
-        data = ts.replay.data
-        rows = (ptr0 + jnp.arange(T)[:, None] * B + jnp.arange(B)[None, :]) % cap  # (T, B)
-        obs, action, terms = data.obs[rows], data.action[rows], data.reward_terms[rows]
+        ts, metrics, steps = trainer.chunk_body(ts, hp)
+        obs, action, terms = steps.obs, steps.action, steps.reward_terms  # (T, local_B, ...)
         signals = rule_signals(cols, obs, action, terms)
         rng, k_teach, k_lag, k_fresh = jax.random.split(fs.rng, 4)
-        active = (fp.teach > 0) & (jnp.arange(B) < teach_envs)
-        teacher, out = batched_teacher(kind_cfgs, dt, fs.teacher, signals, k_teach, kind=fp.kind, active=active)
-        fs = fs.replace(teacher=teacher)
+        env_ids = (jax.lax.axis_index(AXIS) * local_B if sharded else 0) + jnp.arange(local_B)
+        active = (fp.teach > 0) & (env_ids < teach_envs)
+        teacher, out = batched_teacher(kind_cfgs, dt, fs.teacher, signals, local_key(k_teach), kind=fp.kind,
+                                       active=active)
         value, valid, about, score = out["value"], out["valid"], out["about"], out["score"]
 
-        # credit: K lags per event drawn by weight; rows gathered from the replay (earlier chunks too)
-        rel, b_idx, ok, target, n_events = draw_credited_steps(value, valid, fp.lag_w, k_lag, E, K)
-        ok = ok & (it0 + rel >= 0) & (rel >= -back_limit)
-        r = jnp.mod(ptr0 + rel * B + b_idx[:, None], cap).reshape(-1)
+        # credit: K lags per event drawn by weight; (obs, action) from the history (earlier chunks) or the chunk
+        rel, b_idx, ok, target, n_events = draw_credited_steps(value, valid, fp.lag_w, local_key(k_lag), E, K)
+        ok = ok & (it0 + rel >= 0)  # no step before the run's first
+        seen_obs = jnp.concatenate([fs.history.obs, obs])  # (H + T, local_B, ...): step rel is row H + rel
+        seen_act = jnp.concatenate([fs.history.action, action])
+        c_obs = seen_obs[H + rel, b_idx[:, None]].reshape(E * K, obs_size)
+        c_act = seen_act[H + rel, b_idx[:, None]].reshape(E * K, act_size)
         w = ok.astype(jnp.float32).reshape(-1)
         h = target.reshape(-1)
-        c_obs, c_act = data.obs[r], data.action[r]
+        c_obs, c_act, w, h = gather(c_obs), gather(c_act), gather(w), gather(h)
         ring = ring_add(fs.ring, c_obs, c_act, w, h)
         p, o, losses, live = reward_model_updates(apply, opt, fs.rm_params, fs.rm_opt_state, ring,
                                                   (c_obs, c_act, w, h), k_fresh, n_fresh, n_replay,
                                                   rmc.batch_size, rmc.replay_min_rows)
         n_live = jnp.sum(live)
 
-        # diagnostics: r_hat on the chunk's steps, and how it tracks the hidden score
-        flat_o, flat_a = obs.reshape(T * B, -1), action.reshape(T * B, -1)
-        rh = apply(p, flat_o, flat_a)
-        sc = score.reshape(-1)
+        # diagnostics: r_hat on the chunk's steps (all envs), and how it tracks the hidden score
+        rh = gather(apply(p, obs.reshape(-1, obs_size), action.reshape(-1, act_size)).reshape(T, local_B),
+                    axis=1).reshape(-1)
+        sc = gather(score, axis=1).reshape(-1)
         rc, scc = rh - rh.mean(), sc - sc.mean()
         corr = jnp.sum(rc * scc) / jnp.maximum(jnp.sqrt(jnp.sum(rc ** 2) * jnp.sum(scc ** 2)), 1e-12)
-        used = jnp.minimum(n_events, E)
+        used = psum(jnp.minimum(n_events, E))
         credited = jnp.sum(w)
-        pos = jnp.sum(valid & (value > 0))
-        neg = jnp.sum(valid & (value < 0))
+        pos = psum(jnp.sum(valid & (value > 0)))
+        neg = psum(jnp.sum(valid & (value < 0)))
+        n_all = psum(n_events)
         totals = fs.totals + jnp.stack([used, pos, neg, credited, n_live]).astype(jnp.float32)
         nan = jnp.float32(jnp.nan)
         metrics = dict(metrics)
         metrics.update(
-            feedback_events=n_events.astype(jnp.float32), feedback_pos=pos.astype(jnp.float32),
-            feedback_neg=neg.astype(jnp.float32), feedback_dropped=(n_events - used).astype(jnp.float32),
+            feedback_events=n_all.astype(jnp.float32), feedback_pos=pos.astype(jnp.float32),
+            feedback_neg=neg.astype(jnp.float32), feedback_dropped=(n_all - used).astype(jnp.float32),
             credited_rows=credited, rm_updates=n_live.astype(jnp.float32),
             rm_loss=jnp.where(n_live > 0, jnp.sum(jnp.where(live, losses, 0.0)) / jnp.maximum(n_live, 1), nan),
             r_hat_mean=rh.mean(), r_hat_std=rh.std(), r_hat_score_corr=corr,
@@ -242,13 +275,25 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         t_idx, _ = jnp.nonzero(valid, size=E, fill_value=0)
         present = jnp.arange(E) < n_events
         events = {"present": present, "arrival": it0 + t_idx,
-                  "env": b_idx, "value": value[t_idx, b_idx], "about": about[t_idx, b_idx]}
-        fs = fs.replace(rm_params=p, rm_opt_state=o, ring=ring, rng=rng, totals=totals)
+                  "env": env_ids[b_idx], "value": value[t_idx, b_idx], "about": about[t_idx, b_idx]}
+        history = CreditHistory(seen_obs[-H:], seen_act[-H:])
+        fs = fs.replace(teacher=teacher, rm_params=p, rm_opt_state=o, ring=ring, rng=rng, totals=totals,
+                        history=history)
         return ts, fs, metrics, events
 
-    return FeedbackTrainer(trainer=trainer, init=init, chunk=jax.jit(chunk, donate_argnums=(0, 1)),
-                           params=params_for, lag_len=L, max_events=E, apply=apply, chunk_fn=chunk,
-                           signals=lambda o, a, t: rule_signals(cols, o, a, t))
+    if sharded:
+        split = P(AXIS)
+        fs_specs = FeedbackState(
+            teacher=BatchedTeacherState(teacher=split, pending_value=split, pending_valid=split,
+                                        pending_about=split, step=P()),
+            rm_params=P(), rm_opt_state=P(), ring=P(), rng=P(), totals=P(), history=P(None, AXIS))
+        chunk_fn = jax.shard_map(chunk, mesh=trainer.mesh, in_specs=(trainer.state_specs, fs_specs, P()),
+                                 out_specs=(trainer.state_specs, fs_specs, P(), split), check_vma=False)
+    else:
+        chunk_fn = chunk
+    return FeedbackTrainer(trainer=trainer, init=init, chunk=jax.jit(chunk_fn, donate_argnums=(0, 1)),
+                           params=params_for, lag_len=L, max_events=E, apply=apply, chunk_fn=chunk_fn,
+                           signals=lambda o, a, t: rule_signals(cols, o, a, t), history_len=H)
 
 
 def log_events(log, events: dict, kind: str, feedback, dt: float) -> int:

@@ -1,21 +1,21 @@
-"""The host loop of `protamer pretrain`: jitted chunks, and between them logs, progress and checkpoints.
+"""`protamer pretrain`: set up a run directory, run its chunks through the host runner, evaluate.
 
-Everything random lives in the TrainState, and a checkpoint holds all of it (learner, env batch, replay,
-RNG), so `resume=True` continues from the last checkpoint exactly as if the run had never stopped.
+The loop itself (progress bar, CSV/TensorBoard rows, checkpoints, resume) is `experiments.runner`'s, shared
+with `reproduce table2`. Everything random lives in the TrainState (and the feedback state), and a
+checkpoint holds all of it (learner, env batch, replay, RNG), so `resume=True` continues from the last
+checkpoint exactly as if the run had never stopped.
 """
 
 from __future__ import annotations
 
 import json
-import sys
-import time
 from pathlib import Path
 
 import jax
 import yaml
 
 from mjx_protamer.config import ConfigError, read_raw, to_dict
-from mjx_protamer.experiments import checkpoints, memory, metrics, run_log
+from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate
 from mjx_protamer.experiments.run_loader import CONFIG_NAME
 
@@ -59,7 +59,7 @@ def run_pretrain(
 
     tc = config.train
     env = make_env(config)
-    fb = fb_state = fb_params = fb_log = fb_mngr = None
+    fb = fb_state = fb_params = None
     if feedback is None:
         trainer = make_train(config, env, human_reward_fn=human_reward_fn)
     else:
@@ -74,78 +74,57 @@ def run_pretrain(
     memory.check_fits(like, resolve_devices(tc.num_devices), like.replay, config.ddpg.replay_size,
                       other=None if fb_state is None else fb_state)
     out.mkdir(parents=True, exist_ok=True)
-    mngr = checkpoints.manager(ckpt_dir)
+    ckpt = runner.Checkpointer([ckpt_dir] + ([out / "checkpoints_feedback"] if fb is not None else []),
+                               tc.checkpoint_every_chunks)
     checkpoints.write_atomic(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
     if fb is not None:
-        fb_mngr = checkpoints.manager(out / "checkpoints_feedback")
         checkpoints.write_atomic(out / "feedback_config.yaml", yaml.safe_dump(
             {"kind": feedback.kind, "feedback": to_dict(feedback.config), "batched": to_dict(feedback.batched)},
             sort_keys=False).encode())
-    state = trainer.init(jax.random.PRNGKey(tc.seed))
+    # The runner's state: one part per checkpoint directory.
+    parts = (trainer.init(jax.random.PRNGKey(tc.seed)),) + ((fb_state,) if fb is not None else ())
     start = 0
     if resume:
-        pairs = [(mngr, state)] + ([(fb_mngr, fb_state)] if fb is not None else [])
-        step, restored = checkpoints.restore_newest_intact(pairs, lambda line: print(line, file=sys.stderr))
-        start = step
-        state = restored[0]
-        if fb is not None:
-            fb_state = restored[1]
+        start, parts = ckpt.restore(parts)
+    progress_fn = None
     if fb is not None:
+        from mjx_protamer.experiments.feedback_train import log_events
         from mjx_protamer.human.queue import FeedbackLog
 
         fb_log_path = out / "feedback.jsonl"
         _truncate_feedback_log(fb_log_path, (start * tc.chunk_steps) if start else 0)
         fb_log = FeedbackLog(fb_log_path)
         fb_log.note(event="start", kind=feedback.kind, chunk=start)
+
+        def step(parts):
+            ts, fs, m, events = fb.chunk(*parts, fb_params)
+            return (ts, fs), m, events
+
+        def progress_fn(info):
+            log_events(fb_log, info.extra, feedback.kind, feedback.config, feedback.config.dt)
+    else:
+        def step(parts):
+            ts, m = trainer.train_chunk(parts[0], human_params)
+            return (ts,), m, None
     log = run_log.RunLog(out, resume_chunk=start)
+    last_return = [float("nan")]  # the progress bar shows the latest finished episodes' return
 
-    steps_per_chunk = tc.chunk_steps * tc.num_envs
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    def postfix(info):
+        row = info.row
+        if row["episode_return"] == row["episode_return"]:
+            last_return[0] = row["episode_return"]
+        post = dict(sps=f"{row['steps_per_s']:.0f}", ret=f"{last_return[0]:.1f}", contact=f"{row['contact_rate']:.2f}")
+        if fb is not None:
+            post.update(fb=f"{row['feedback_total']:.0f}", rhat=f"{row['r_hat_mean']:+.2f}")
+        return post
 
-        bar = tqdm(total=tc.num_chunks * steps_per_chunk, initial=start * steps_per_chunk, unit="step",
-                   dynamic_ncols=True, desc="pretrain")
-    t_start = time.perf_counter()
-    timed_steps, timed_s = 0, 0.0
-    last_return = float("nan")  # the progress bar shows the latest finished episodes' return
-    chunk = start
-    for chunk in range(start + 1, tc.num_chunks + 1):
-        if max_chunks is not None and chunk - start > max_chunks:
-            chunk -= 1
-            break
-        t0 = time.perf_counter()
-        if fb is None:
-            state, m = trainer.train_chunk(state, human_params)
-            m = jax.device_get(m)
-        else:
-            from mjx_protamer.experiments.feedback_train import log_events
-
-            state, fb_state, m, events = fb.chunk(state, fb_state, fb_params)
-            m, events = jax.device_get((m, events))
-            log_events(fb_log, events, feedback.kind, feedback.config, feedback.config.dt)
-        dt = time.perf_counter() - t0
-        if chunk > start + 1 or tc.num_chunks - start == 1:  # the first chunk of a process pays the compile
-            timed_steps += steps_per_chunk
-            timed_s += dt
-        row = {"chunk": float(chunk), **run_log.flatten(m, env.reward_term_names),
-               "steps_per_s": steps_per_chunk / dt, "wall_s": time.perf_counter() - t_start}
-        log.write(row)
-        if chunk % tc.checkpoint_every_chunks == 0 or chunk == tc.num_chunks:
-            checkpoints.save(mngr, chunk, state)
-            if fb is not None:
-                checkpoints.save(fb_mngr, chunk, fb_state)
-        if bar is not None:
-            bar.update(steps_per_chunk)
-            if row["episode_return"] == row["episode_return"]:
-                last_return = row["episode_return"]
-            post = dict(sps=f"{steps_per_chunk / dt:.0f}", ret=f"{last_return:.1f}",
-                        contact=f"{row['contact_rate']:.2f}")
-            if fb is not None:
-                post.update(fb=f"{row['feedback_total']:.0f}", rhat=f"{row['r_hat_mean']:+.2f}")
-            bar.set_postfix(**post)
-    if bar is not None:
-        bar.close()
+    run = runner.run_chunks(step, parts, tc.num_chunks, tc.chunk_steps * tc.num_envs, start=start,
+                            max_chunks=max_chunks, progress_fn=progress_fn, log=log,
+                            term_names=env.reward_term_names, checkpointer=ckpt,
+                            bar="pretrain" if progress else None, postfix=postfix)
+    state, chunk = run.state[0], run.chunks_done
+    if fb is not None:
+        fb_state = run.state[1]
     log.close()
     if fb is not None:
         from mjx_protamer.experiments.feedback_train import reward_model_bytes
@@ -153,18 +132,17 @@ def run_pretrain(
         fb_log.note(event="end", chunk=chunk, totals=[float(x) for x in jax.device_get(fb_state.totals)])
         fb_log.close()
         checkpoints.write_atomic(out / "reward_model.msgpack", reward_model_bytes(fb_state))
-        fb_mngr.close()
 
     result = {
         "out_dir": str(out),
         "config": str(config_path),
-        "checkpoint": str(ckpt_dir / str(mngr.latest_step())) if mngr.latest_step() is not None else None,
+        "checkpoint": str(ckpt.latest()) if ckpt.latest() is not None else None,
         "csv": str(log.csv_path),
         "tensorboard": str(out / "tb"),
         "chunks_done": chunk,
-        "finished": chunk == tc.num_chunks,
-        "train_wall_s": time.perf_counter() - t_start,
-        "steps_per_s": timed_steps / timed_s if timed_s > 0 else float("nan"),
+        "finished": run.finished,
+        "train_wall_s": run.wall_s,
+        "steps_per_s": run.steps_per_s,
         "state": state,
     }
     if fb is not None:
@@ -182,7 +160,7 @@ def run_pretrain(
         (out / "eval.json").write_text(json.dumps(summary, indent=2))
         result["eval"] = summary
         result["eval_json"] = str(out / "eval.json")
-    mngr.close()
+    ckpt.close()
     return result
 
 

@@ -35,6 +35,7 @@ from mjx_protamer.config import ConfigError, check, to_dict
 from mjx_protamer.experiments import metrics as M
 from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, make_feedback_train
 from mjx_protamer.experiments.run_log import flatten
+from mjx_protamer.experiments.runner import run_chunks
 from mjx_protamer.human.tamer_loop import FeedbackConfig
 
 # Paper Table II (means over 10 test episodes).
@@ -140,23 +141,28 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
         kind = None if cond.channel == "none" else cond.channel
         credit = dataclasses.replace(cfg.feedback.credit, scheme=cond.credit)
         t0 = time.perf_counter()
-        ts, fs = init(keys), init_feedback(seeds)
         fp = ft.params(kind, credit)
         fp = fp._replace(gain=fp.gain * cond.beta_scale)
-        for chunk in range(1, tc.num_chunks + 1):
-            ts, fs, m, _ = chunk_fn(ts, fs, fp)
-            m = jax.device_get(m)
-            rows = [{"condition": cond.name, "seed": int(seed), "chunk": chunk,
-                     **flatten(jax.tree.map(lambda x, i=i: x[i], m), env.reward_term_names)}
+
+        def step(state):  # called within this iteration: fp, cond and t0 are this condition's
+            ts, fs, m, _ = chunk_fn(*state, fp)
+            return (ts, fs), m, None
+
+        def progress_fn(info):
+            rows = [{"condition": cond.name, "seed": int(seed), "chunk": info.chunk,
+                     **flatten(jax.tree.map(lambda x, i=i: x[i], info.metrics), env.reward_term_names)}
                     for i, seed in enumerate(cfg.seeds)]
-            training += rows
-            if progress and (chunk % max(1, tc.num_chunks // 5) == 0 or chunk == tc.num_chunks):
-                print(f"[{cond.name}, {len(seeds)} seeds] chunk {chunk}/{tc.num_chunks} return "
+            training.extend(rows)
+            if progress and (info.chunk % max(1, tc.num_chunks // 5) == 0 or info.chunk == tc.num_chunks):
+                print(f"[{cond.name}, {len(seeds)} seeds] chunk {info.chunk}/{tc.num_chunks} return "
                       f"{np.nanmean([r['episode_return'] for r in rows]):.1f} contact "
                       f"{np.mean([r['contact_rate'] for r in rows]):.2f} feedback "
                       f"{np.mean([r['feedback_total'] for r in rows]):.0f} r_hat corr "
                       f"{np.mean([r['r_hat_score_corr'] for r in rows]):+.2f} "
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
+
+        ts, fs = run_chunks(step, (init(keys), init_feedback(seeds)), tc.num_chunks,
+                            tc.chunk_steps * tc.num_envs * len(seeds), progress_fn=progress_fn).state
         train_s = time.perf_counter() - t0
         results = evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params, untrained)
         for i, seed in enumerate(cfg.seeds):

@@ -2,10 +2,10 @@
 
 One iteration of the loop (`TamerRun.step_chunk`):
 
-1. `trainer.train_chunk(state, model.params)`: `chunk_steps` DDPG iterations in one jit; the reward at
+1. `trainer.collect_chunk(state, model.params)`: `chunk_steps` DDPG iterations in one jit; the reward at
    sample time is `alpha * r_env + beta * r_hat(params, s, a)`; the params are an argument (no recompile).
-2. The watched env's steps of the chunk (obs, action, reward terms) are read back from the DDPG replay
-   rows the chunk wrote (row `ptr + i * num_envs + watch_env` for iteration i).
+2. The watched env's steps of the chunk (obs, action, reward terms) are taken from the transitions the
+   chunk's scan emits ((T, B, ...), column `watch_env`).
 3. Time mapping: the chunk's steps are stamped on the `StepClock` at their presentation times
    (`record_chunk(first_step, n, t0, dt)`): with a simulated teacher on a `VirtualClock` that advances
    by dt per step (real-time-equivalent), live from the wall-clock moment the chunk is shown.
@@ -95,10 +95,6 @@ class TamerRun:
                                   devices=jax.devices()[:1])
         self.state = self.trainer.init(jax.random.PRNGKey(tc.seed)) if state is None else state
         self.commit_state()
-        capacity = self.state.replay.capacity
-        if capacity < tc.chunk_steps * tc.num_envs:
-            raise ValueError(f"the DDPG replay ({capacity} rows) must hold one chunk "
-                             f"({tc.chunk_steps} x {tc.num_envs} envs) to read the watched env's steps back")
         self.simulated = feedback is not None and feedback.startswith("simulated")
         live = feedback is not None and not self.simulated
         self.clock = clock or (time.time if live else VirtualClock(start=time.time()))
@@ -128,22 +124,19 @@ class TamerRun:
         self.model.params = jax.device_put(self.model.params, device)
         self.model.opt_state = jax.device_put(self.model.opt_state, device)
 
-    def _watched_rows(self, ptr_before: int) -> dict[str, np.ndarray]:
-        tc = self.config.pretrain.train
-        rows = (ptr_before + np.arange(tc.chunk_steps) * tc.num_envs + self.config.feedback.watch_env) \
-            % self.state.replay.capacity
-        data = jax.device_get(jax.tree.map(lambda x: x[jnp.asarray(rows)], self.state.replay.data))
-        return {"obs": data.obs, "action": data.action, "reward_terms": data.reward_terms}
+    def _watched_rows(self, steps) -> dict[str, np.ndarray]:
+        w = self.config.feedback.watch_env
+        obs, action, terms = jax.device_get((steps.obs[:, w], steps.action[:, w], steps.reward_terms[:, w]))
+        return {"obs": obs, "action": action, "reward_terms": terms}
 
     def step_chunk(self, t0: float | None = None) -> dict:
         """One DDPG chunk, then the feedback path. `t0`: presentation time of the chunk's first step
         (default: the clock now). Returns the chunk's metrics plus feedback counters."""
         tc, fc = self.config.pretrain.train, self.config.feedback
-        ptr_before = int(self.state.replay.ptr)
         params = self.model.params if self.use_model else None
-        self.state, metrics = self.trainer.train_chunk(self.state, params)
+        self.state, metrics, steps = self.trainer.collect_chunk(self.state, params)
         metrics = jax.device_get(metrics)
-        rows = self._watched_rows(ptr_before)
+        rows = self._watched_rows(steps)
         n, first = tc.chunk_steps, self.first_step
         t0 = self.clock() if t0 is None else t0
         if len(self.step_clock):  # a chunk computed faster than real time is shown after the previous one

@@ -23,6 +23,12 @@ SCRIPT = textwrap.dedent(
     state = trainer.init(jax.random.PRNGKey(0))
     for _ in range(config.train.num_chunks):
         state, m = trainer.train_chunk(state, None)
+    ptr0 = int(state.replay.ptr)
+    state, m, steps = trainer.collect_chunk(state, None)  # the emitted transitions, split over devices by env
+    T = config.train.chunk_steps
+    rows = (ptr0 + np.arange(T)[:, None] * 2 + np.arange(2)) % 500  # each device's own replay (500 rows)
+    emitted_match = all(np.array_equal(np.asarray(r.data)[rows], np.asarray(e.data))
+                        for r, e in zip(state.replay.data.obs.addressable_shards, steps.obs.addressable_shards))
     kernel = state.critic_params["params"]["Dense_1"]["kernel"]
     replicas = [np.asarray(s.data) for s in kernel.addressable_shards]
     obs_shards = [np.asarray(s.data) for s in state.env_state.obs.addressable_shards]
@@ -35,6 +41,9 @@ SCRIPT = textwrap.dedent(
         "env_local": [o.shape[0] for o in obs_shards],
         "envs_differ": not np.allclose(obs_shards[0], obs_shards[1]),
         "replay_size": int(state.replay.size),
+        "emitted_shape": list(steps.obs.shape),
+        "emitted_local": [list(x.data.shape) for x in steps.obs.addressable_shards],
+        "emitted_match": emitted_match,
         "critic_loss": float(m["critic_loss"]),
         "env_steps": int(m["env_steps"]),
     }))
@@ -53,5 +62,7 @@ def test_two_device_data_parallel_training():
     assert r["replica_count"] == 2 and r["replicas_equal"], "gradients must be averaged: replicas identical"
     assert r["replay_local_rows"] == [500, 500] and r["env_local"] == [2, 2]
     assert r["envs_differ"]
-    assert r["replay_size"] == 100 * 2  # per device: 100 iterations x 2 local envs
-    assert r["env_steps"] == 400 and r["critic_loss"] == r["critic_loss"]  # finite, not NaN
+    assert r["replay_size"] == 150 * 2  # per device: 100 + 50 (collect_chunk) iterations x 2 local envs
+    assert r["env_steps"] == 600 and r["critic_loss"] == r["critic_loss"]  # finite, not NaN
+    assert r["emitted_shape"] == [50, 4, 6] and r["emitted_local"] == [[50, 2, 6]] * 2
+    assert r["emitted_match"], "each device emits the transitions it stored, in stepping order"

@@ -151,3 +151,32 @@ def test_quiet_envs_act_with_the_deterministic_actor():
     gap = np.abs(action - greedy).max(axis=-1)[rows]  # (iterations, envs)
     assert gap[:, 2:].max() < 1e-6  # the same actor, up to float rounding of a different batch shape
     assert gap[:, :2].min() > 1e-3
+
+
+def test_chunk_emits_the_transitions_it_stores_and_train_chunk_does_not_pay_for_them():
+    """`collect_chunk`'s scan emits every iteration's transitions, (T, B, ...): exactly the rows the replay
+    received (iteration i, env b at row ptr + i B + b), and the same state and metrics as `train_chunk`.
+    `train_chunk` drops them: its compiled program is no larger than a chunk that never stacked them."""
+    config = tiny_config(num_envs=8, chunk_steps=100, total_env_steps=1600)
+    trainer = make_train(config, PointReachEnv())
+    tc = config.train
+    a = trainer.init(jax.random.PRNGKey(0))
+    b = trainer.init(jax.random.PRNGKey(0))
+    mem_train = trainer.train_chunk.lower(a, None).compile().memory_analysis()
+    mem_collect = trainer.collect_chunk.lower(a, None).compile().memory_analysis()
+    for _ in range(2):  # the second chunk wraps the 1000-row replay (2 x 800 rows)
+        ptr0 = int(b.replay.ptr)
+        a, ma = trainer.train_chunk(a, None)
+        b, mb, steps = trainer.collect_chunk(b, None)
+        assert steps.obs.shape == (tc.chunk_steps, tc.num_envs, 6) and steps.terminal.shape == (100, 8)
+        rows = (ptr0 + np.arange(tc.chunk_steps)[:, None] * tc.num_envs + np.arange(tc.num_envs)) % 1000
+        for field, emitted in zip(steps._fields, steps):
+            np.testing.assert_array_equal(np.asarray(getattr(b.replay.data, field))[rows], np.asarray(emitted),
+                                          err_msg=field)
+        assert np.asarray(steps.terminal).sum() == 0 and np.abs(np.asarray(steps.action)).max() <= 1.0
+        jax.tree.map(lambda x, y: np.testing.assert_array_equal(np.asarray(x), np.asarray(y)), (a, ma), (b, mb))
+    traj_bytes = sum(x.nbytes for x in jax.tree.leaves(steps))
+    extra_out = mem_collect.output_size_in_bytes - mem_train.output_size_in_bytes
+    assert traj_bytes <= extra_out <= traj_bytes + 8 * len(steps)  # + one tuple slot per emitted field
+    assert mem_train.temp_size_in_bytes < traj_bytes <= mem_collect.temp_size_in_bytes + traj_bytes
+    assert mem_train.temp_size_in_bytes <= mem_collect.temp_size_in_bytes

@@ -7,6 +7,13 @@ Shaped like PureJaxRL. `make_train(config, env)` returns pure functions:
   `lax.scan`; an iteration steps every env once (`_env_step`) and then makes `updates_per_step` gradient
   updates (`_update`: critic, actor, soft target update). Jitted once; `human_params` is an argument, so a
   new human-reward model never recompiles. The host (logging, progress, checkpoints) runs between chunks;
+- `collect_chunk(train_state, human_params) -> (train_state, metrics, transitions)`: the same chunk, and the
+  scan's per-iteration `replay.Transition`s, (chunk_steps, num_envs, ...), in the order they were stepped
+  (PureJaxRL's trajectory). `train_chunk` is this function with the transitions dropped: XLA removes the
+  unused stacked outputs (the compiled temp and output sizes are those of a chunk that never emits them,
+  checked in tests/ddpg/test_train.py), so nobody pays for them unless they ask;
+- `chunk_body`: `collect_chunk` before jit and shard_map (the per-device body over axis `AXIS`, with
+  `state_specs`), for callers that add work inside the same program (the feedback path);
 - `train(rng, human_params=None) -> (train_state, metrics per chunk)`: init and every chunk in one pure
   function, to `jax.jit(jax.vmap(train))` over seeds (single device only).
 
@@ -66,12 +73,15 @@ class Learner(NamedTuple):
 class Trainer(NamedTuple):
     init: Callable[[jax.Array], TrainState]
     train_chunk: Callable[[TrainState, Any], tuple[TrainState, dict]]
+    collect_chunk: Callable[[TrainState, Any], tuple[TrainState, dict, replay.Transition]]  # + (T, B, ...) steps
+    chunk_body: Callable  # collect_chunk unjitted, per device (inside shard_map over AXIS when sharded)
     train: Callable | None  # None when sharded over several devices
     act: Callable[[Any, jax.Array], jax.Array]  # deterministic actor
     env: Any  # the wrapped, batched env
     mesh: Mesh | None
     state_sharding: Any  # TrainState of NamedSharding (None when unsharded)
     num_devices: int
+    state_specs: Any  # TrainState of PartitionSpec prefixes (None when unsharded)
 
 
 def _learner(ts: TrainState) -> Learner:
@@ -233,11 +243,11 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             replay=replay.add(ts.replay, transition),
             episode_return=jnp.where(done > 0, 0.0, episode_return),
         )
-        return ts, stats
+        return ts, stats, transition
 
     def _iteration(ts: TrainState, human_params):
         rng, k_noise, k_random, k_update = jax.random.split(ts.rng, 4)
-        ts, stats = _env_step(ts, k_noise, k_random)
+        ts, stats, transition = _env_step(ts, k_noise, k_random)
         if tc.updates_per_step > 0:
             learn = ts.iteration >= warmup_iterations
             lr, update_stats, n_updates = jax.lax.cond(
@@ -246,10 +256,11 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         else:
             update_stats, n_updates = jnp.zeros((4,)), jnp.float32(0.0)
         stats.update(update_stats=update_stats, updates=n_updates)
-        return _strong(ts.replace(rng=rng, iteration=ts.iteration + 1)), stats
+        return _strong(ts.replace(rng=rng, iteration=ts.iteration + 1)), (stats, transition)
 
-    def _chunk(ts: TrainState, human_params):
-        ts, stats = jax.lax.scan(lambda t, _: _iteration(t, human_params), ts, None, length=tc.chunk_steps)
+    def _collect_chunk(ts: TrainState, human_params):
+        ts, (stats, transitions) = jax.lax.scan(lambda t, _: _iteration(t, human_params), ts, None,
+                                                length=tc.chunk_steps)
         total = jax.tree.map(lambda x: psum(jnp.sum(x, axis=0)), stats)
         env_steps = tc.chunk_steps * tc.num_envs
         updates = jnp.maximum(total["updates"] / (n_dev if sharded else 1), 1.0)
@@ -269,6 +280,10 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             "q_mean": jnp.where(has_updates, u[2] / updates, nan),
             "sampled_reward": jnp.where(has_updates, u[3] / updates, nan),
         }
+        return ts, metrics, transitions
+
+    def _chunk(ts: TrainState, human_params):
+        ts, metrics, _ = _collect_chunk(ts, human_params)
         return ts, metrics
 
     def act(actor_params, obs):
@@ -279,8 +294,10 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             ts = init(rng)
             return jax.lax.scan(lambda t, _: _chunk(t, human_params), ts, None, length=tc.num_chunks)
 
-        return Trainer(init=jax.jit(init), train_chunk=jax.jit(_chunk, donate_argnums=0), train=train,
-                       act=jax.jit(act), env=venv, mesh=None, state_sharding=None, num_devices=1)
+        return Trainer(init=jax.jit(init), train_chunk=jax.jit(_chunk, donate_argnums=0),
+                       collect_chunk=jax.jit(_collect_chunk, donate_argnums=0), chunk_body=_collect_chunk,
+                       train=train, act=jax.jit(act), env=venv, mesh=None, state_sharding=None, num_devices=1,
+                       state_specs=None)
 
     mesh = Mesh(np.array(devices), (AXIS,))
     specs = _state_specs()
@@ -289,12 +306,18 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         jax.shard_map(_chunk, mesh=mesh, in_specs=(specs, P()), out_specs=(specs, P()), check_vma=False),
         donate_argnums=0,
     )
+    sharded_collect = jax.jit(
+        jax.shard_map(_collect_chunk, mesh=mesh, in_specs=(specs, P()), out_specs=(specs, P(), P(None, AXIS)),
+                      check_vma=False),
+        donate_argnums=0,
+    )
     abstract = jax.eval_shape(sharded_init, jax.random.PRNGKey(0))
     state_sharding = jax.tree.map(
         lambda spec, sub: jax.tree.map(lambda _: NamedSharding(mesh, spec), sub),
         specs, abstract, is_leaf=lambda x: isinstance(x, P))
-    return Trainer(init=sharded_init, train_chunk=sharded_chunk, train=None, act=jax.jit(act), env=venv,
-                   mesh=mesh, state_sharding=state_sharding, num_devices=n_dev)
+    return Trainer(init=sharded_init, train_chunk=sharded_chunk, collect_chunk=sharded_collect,
+                   chunk_body=_collect_chunk, train=None, act=jax.jit(act), env=venv, mesh=mesh,
+                   state_sharding=state_sharding, num_devices=n_dev, state_specs=specs)
 
 
 def _state_specs() -> TrainState:

@@ -1,0 +1,149 @@
+"""The in-jit feedback chunk's data path: DDPG alone is plain DDPG bit for bit, the credit history holds what
+the replay holds, and the chunk runs sharded over two devices like plain DDPG."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+from mjx_protamer.config import from_dict
+
+RAW = {
+    "pretrain": {
+        "env_name": "toy",
+        "ddpg": {"actor_hidden": [16], "critic_hidden": [16, 16], "replay_size": 2000, "batch_size": 16,
+                 "reward_beta": 1.0},
+        "train": {"num_envs": 4, "episode_length": 25, "total_env_steps": 800, "warmup_env_steps": 100,
+                  "chunk_steps": 20, "num_devices": 0},
+    },
+    "feedback": {
+        "dt": 0.05,
+        "reward_model": {"hidden": [16]},
+        "teacher": {"min_gap_steps": 2, "rule": [{"signal": "reach", "value": 1.0, "above": 0.5},
+                                                 {"signal": "action:1", "value": -1.0, "below": -0.5}]},
+    },
+}
+
+
+def build(raw=RAW):
+    from mjx_protamer.experiments.env_factory import make_env
+    from mjx_protamer.experiments.feedback_train import make_feedback_train
+    from mjx_protamer.experiments.table2 import Table2Config
+
+    cfg = from_dict(Table2Config, raw)
+    return cfg, make_feedback_train(cfg.pretrain, make_env(cfg.pretrain), cfg.feedback, cfg.batched)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    return build()
+
+
+def _equal(a, b):
+    return all(np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)
+               for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+
+
+def test_gain_zero_is_plain_ddpg_bit_for_bit(setup):
+    """DDPG alone through the feedback chunk (silent teacher, gain 0) = `train_chunk` of a trainer without
+    any human reward: the same learner, env batch and replay, and the same DDPG metrics, chunk by chunk."""
+    from mjx_protamer.agents.ddpg.train import make_train
+    from mjx_protamer.experiments.env_factory import make_env
+
+    cfg, ft = setup
+    plain = make_train(cfg.pretrain, make_env(cfg.pretrain))
+    ts, fs = ft.trainer.init(jax.random.PRNGKey(3)), ft.init(3)
+    ref = plain.init(jax.random.PRNGKey(3))
+    fp = ft.params(None, cfg.feedback.credit)
+    for _ in range(cfg.pretrain.train.num_chunks):
+        ts, fs, m, _ = ft.chunk(ts, fs, fp)
+        ref, mr = plain.train_chunk(ref, None)
+        assert _equal({k: m[k] for k in mr}, mr)
+    assert _equal(ts, ref)
+    assert float(m["feedback_total"]) == 0 and float(m["credited_rows_total"]) == 0
+
+
+def test_credit_history_is_what_the_replay_holds(setup):
+    """The credited (obs, action) of steps before a chunk come from the carried history, not the replay: after
+    every chunk, history row h of env b is the replay row the pointer arithmetic of the old path read
+    (step H - h back: row ptr - (H - h) B + b). The events arrive, are credited and train the model."""
+    cfg, ft = setup
+    B, H, cap = cfg.pretrain.train.num_envs, ft.history_len, cfg.pretrain.ddpg.replay_size
+    assert H == ft.lag_len - 1 and H > cfg.pretrain.train.chunk_steps  # windows reach several chunks back
+    ts, fs = ft.trainer.init(jax.random.PRNGKey(0)), ft.init(0)
+    fp = ft.params("prosody", dataclasses.replace(cfg.feedback.credit, scheme="time_window"))
+    for chunk in range(1, cfg.pretrain.train.num_chunks + 1):
+        ts, fs, m, ev = ft.chunk(ts, fs, fp)
+        filled = min(H, chunk * cfg.pretrain.train.chunk_steps)
+        rows = (int(ts.replay.ptr) + (np.arange(H - filled, H)[:, None] - H) * B + np.arange(B)) % cap
+        np.testing.assert_array_equal(np.asarray(fs.history.obs)[H - filled:], np.asarray(ts.replay.data.obs)[rows])
+        np.testing.assert_array_equal(np.asarray(fs.history.action)[H - filled:],
+                                      np.asarray(ts.replay.data.action)[rows])
+    assert float(m["feedback_total"]) > 20 and float(m["credited_rows_total"]) > float(m["feedback_total"])
+    assert float(m["rm_updates_total"]) > 0 and float(m["feedback_dropped"]) == 0
+
+
+SCRIPT = textwrap.dedent(
+    """
+    import dataclasses, json, sys
+    import jax, jax.numpy as jnp, numpy as np
+    sys.path.insert(0, sys.argv[1] + "/tests/experiments")
+    from test_feedback_chunk import build
+
+    cfg, ft = build()
+    fp = ft.params("keyboard", dataclasses.replace(cfg.feedback.credit, scheme="step_window"))
+    ts, fs = ft.trainer.init(jax.random.PRNGKey(0)), ft.init(0)
+    envs = set()
+    for _ in range(cfg.pretrain.train.num_chunks):
+        ts, fs, m, ev = ft.chunk(ts, fs, fp)
+        ev = jax.device_get(ev)
+        envs |= {int(e) for p, e in zip(ev["present"], ev["env"]) if p}
+    shards = lambda x: [np.asarray(s.data) for s in x.addressable_shards]
+    rm, actor = shards(jax.tree.leaves(fs.rm_params)[0]), shards(jax.tree.leaves(ts.actor_params)[0])
+    m = jax.device_get(m)
+    # seeds vmapped over the sharded program, as `reproduce table2` runs it
+    vts = jax.jit(jax.vmap(ft.trainer.init))(jax.vmap(jax.random.PRNGKey)(jnp.arange(2)))
+    vfs = jax.jit(jax.vmap(ft.init))(jnp.arange(2))
+    vchunk = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)))
+    for _ in range(cfg.pretrain.train.num_chunks):
+        vts, vfs, vm, _ = vchunk(vts, vfs, fp)
+    print(json.dumps({
+        "devices": ft.trainer.num_devices, "replicas": len(rm),
+        "rm_replicas_equal": all(np.array_equal(rm[0], r) for r in rm),
+        "actor_replicas_equal": all(np.array_equal(actor[0], r) for r in actor),
+        "history_local": [list(s.shape) for s in shards(fs.history.obs)], "history_len": ft.history_len,
+        "event_envs": sorted(envs), "feedback_total": float(m["feedback_total"]),
+        "rm_updates_total": float(m["rm_updates_total"]), "credited": float(m["credited_rows_total"]),
+        "corr": float(m["r_hat_score_corr"]),
+        "vmapped_seed0": float(vm["feedback_total"][0]), "vmapped_seed1": float(vm["feedback_total"][1]),
+    }))
+    """
+)
+
+
+def test_feedback_chunk_runs_on_two_devices():
+    """Over 2 forced host devices: envs, teachers and credit history split; the reward model replicated and
+    updated identically on each (replicas equal); events come from the envs of both devices; seeds vmap over
+    the sharded program (seed 0 vmapped = seed 0 alone)."""
+    root = Path(__file__).resolve().parents[2]
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(root)], env=env, capture_output=True, text=True,
+                          timeout=600, cwd=root)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r["devices"] == 2 and r["replicas"] == 2
+    assert r["rm_replicas_equal"] and r["actor_replicas_equal"]
+    assert r["history_local"] == [[r["history_len"], 2, 6]] * 2
+    assert r["event_envs"] == [0, 1, 2, 3]
+    assert r["feedback_total"] > 20 and r["credited"] > r["feedback_total"] and r["rm_updates_total"] > 0
+    assert np.isfinite(r["corr"])
+    assert r["vmapped_seed0"] == r["feedback_total"] and r["vmapped_seed1"] > 0
