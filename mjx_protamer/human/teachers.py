@@ -8,7 +8,7 @@ Scoring rule (hidden from the learner)
     "obs:i" / "action:i", or "obs_norm:a:b[,c:d]" (the L2 norm of obs slices). A clause fires when its signal
     is above `above` and below `below` for `sustain` consecutive steps; the step's score is the clipped sum
     of the fired clauses' values. The default rule (self-touch, `SELF_TOUCH_RULE`): approve touching with
-    both hands, disapprove a freeze; see there why it is built that way.
+    the right hand while moving, disapprove the left hand and a freeze; see there why it is built that way.
 
 Giving model
     A step whose |score| >= threshold is eligible; the teacher gives with probability `give_rate`, never
@@ -65,17 +65,20 @@ class Clause:
         check(-1.0 <= self.value <= 1.0, "value", f"must be in [-1, 1], got {self.value}")
 
 
-# The default hidden rule (self-touch, 84-dim observation with k = 10): "touch yourself with both hands, and
-# don't freeze". Each clause reads what the learner sees in (s, a) (the left and right touch blocks obs 0:26
-# and 26:52, the arm joint speeds obs 64:68 and 70:74) and holds for longer than a reaction delay's spread
-# (0.1-0.3 s), so a reward model can learn it from delayed feedback; and it asks for something the intrinsic
-# reward does not (its contact term saturates with one hand, and nothing in it asks for the other). With
-# threshold 0.5 the teacher approves a sustained touch (+0.5; both hands +1: a prosody teacher sounds happier)
-# and disapproves a freeze (-1; -0.5 while touching). Threshold 0.75 (both hands only) gave 100-175 events per
-# 64k-step run, too few for the reward model (r_hat_corr_test ~0 over 5 seeds; docs/experiments.md).
+# The default hidden rule (self-touch, 84-dim observation with k = 10): "touch yourself with your RIGHT hand,
+# not the left, and keep moving" (a caregiver shaping handedness). Each clause reads what the learner sees in
+# (s, a): the left and right touch blocks obs 0:26 and 26:52, the arm joint speeds obs 64:68 and 70:74; each
+# holds for longer than a reaction delay's spread (0.1-0.3 s), so a reward model can learn it from delayed
+# feedback. It asks for something the intrinsic reward is blind to (which hand touches), so feedback has
+# something to change; and its signs are balanced on the baseline's behaviour, which touches with both hands
+# (DDPG's mean score on test episodes is near 0). With threshold 0.5: a right-hand touch while moving is
+# approved (+0.5), a left-hand touch (-1), a right-hand touch held frozen (-0.5) and a freeze (-1) are not.
+# Measured against the first default ("both hands, don't freeze": +0.5 per hand): 96% of its feedback was +1,
+# because the baseline touches 95% of the time, so r_hat could not tell the states apart
+# (r_hat_corr_test 0.12 +- 0.30) and DTK's behaviour did not move (docs/experiments.md).
 SELF_TOUCH_RULE = (
-    Clause("obs_norm:0:26", 0.5, above=0.05, sustain=20),  # left hand or fingers touching, held 0.1 s
     Clause("obs_norm:26:52", 0.5, above=0.05, sustain=20),  # right hand or fingers touching, held 0.1 s
+    Clause("obs_norm:0:26", -1.0, above=0.05, sustain=20),  # left hand or fingers touching, held 0.1 s
     Clause("obs_norm:64:68,70:74", -1.0, below=0.5, sustain=60),  # arms frozen (< 0.5 rad/s) for 0.3 s
 )
 # (The first version's rule read reward terms: a region onset, which lasts one step, and the joint-limit

@@ -126,7 +126,7 @@ def batched_ddpg() -> DDPGConfig:
     theta 0.15 changes the target every 5 ms step, and stiff 200 Hz servos turn that into 10-20 rad/s of
     jitter (the movement band is then never met and the critic never sees a slow or frozen arm). With the
     paper's sigma 0.6 and tau 0.001, batched self-touch training collapses after ~30k env steps."""
-    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042))
+    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042, quiet_fraction=0.25))
 
 
 @dataclass(frozen=True)
