@@ -117,12 +117,13 @@ class AsrConfig:
     compute_type: str = "int8"
     beam_size: int = 1
     max_new_tokens: int = 32
-    # faster-whisper: the encoder sees the segment plus `pad_s` of silence instead of Whisper's fixed 30 s
-    # window (null: the full window). The encoder's cost grows with its input, and a 3.5 s segment in a
-    # 30 s window is mostly padding; docs/voice.md has the measured speed and accuracy of both.
-    pad_s: float | None = 1.0
-    # A short window makes Whisper loop ("yes yes yes ..."): decoding stops after this many tokens per
-    # second of segment (plus 4), and the rule layer keeps one copy of a repeated phrase.
+    # faster-whisper: the encoder's input in seconds, the segment padded with silence to this length (a
+    # longer segment: its own length), instead of Whisper's fixed 30 s window (null). The encoder's cost
+    # grows with its input and a 3.5 s segment in 30 s is mostly padding; much shorter windows make
+    # Whisper loop and mishear more (docs/voice.md has the measured speed and accuracy).
+    window_s: float | None = 10.0
+    # Decoding stops after 4 + this many tokens per second of segment (a looping decoder stops early);
+    # the rule layer keeps one copy of a repeated phrase.
     max_tokens_per_s: float = 8.0
     initial_prompt: str = ""        # faster-whisper: text the decoder sees as what came before
     # Transcripts whose mean token log-probability is below this give no feedback (rule `low_confidence`):
@@ -135,7 +136,7 @@ class AsrConfig:
         check(bool(self.model.strip()), "model", "must name a model")
         check(1 <= self.beam_size <= 10, "beam_size", "must be 1..10")
         check(1 <= self.max_new_tokens <= 440, "max_new_tokens", "must be 1..440")
-        check(self.pad_s is None or 0.0 <= self.pad_s <= 30.0, "pad_s", "must be within 0..30 s, or null")
+        check(self.window_s is None or 1.0 <= self.window_s <= 30.0, "window_s", "must be within 1..30 s, or null")
         check(self.max_tokens_per_s > 0.0, "max_tokens_per_s", "must be > 0")
         check(self.min_avg_logprob is None or self.min_avg_logprob < 0.0, "min_avg_logprob",
               "must be < 0 (a log-probability), or null")

@@ -174,8 +174,8 @@ class FasterWhisperTranscriber:
     time: log-mel features, one encoder pass, one greedy (or beam) decode without timestamps.
 
     faster-whisper's `transcribe` would pad every segment to Whisper's 30 s window; here the encoder sees
-    the segment plus `asr.pad_s` of silence (CTranslate2 accepts a shorter mel), which is what makes a
-    3 s utterance cheap. faster-whisper provides the model loading, feature extractor and tokenizer.
+    the segment padded to `asr.window_s` (CTranslate2 accepts a shorter mel), which is what makes a 3 s
+    utterance cheap. faster-whisper provides the model loading, feature extractor and tokenizer.
     """
 
     def __init__(self, cfg):
@@ -219,10 +219,10 @@ class FasterWhisperTranscriber:
         self.window_frames = fe.nb_max_frames      # Whisper's 30 s window: 3000 frames of 10 ms
 
     def frames_for(self, content_frames: int) -> int:
-        """Encoder input length: the segment plus `pad_s` of silence, at most Whisper's window."""
-        if self.cfg.pad_s is None:
+        """Encoder input length (10 ms frames): `window_s`, or the segment when longer, at most 30 s."""
+        if self.cfg.window_s is None:
             return self.window_frames
-        return min(self.window_frames, content_frames + int(round(self.cfg.pad_s * 100)))
+        return min(self.window_frames, max(content_frames, int(round(self.cfg.window_s * 100))))
 
     def max_new_tokens(self, seconds: float) -> int:
         return max(1, min(self.cfg.max_new_tokens, int(math.ceil(4 + self.cfg.max_tokens_per_s * seconds))))

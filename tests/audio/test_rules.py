@@ -84,8 +84,8 @@ def test_config_validation_names_the_field():
         voice_config("vad.kind=energy")
     with pytest.raises(ConfigError, match="sentiment.discourse_markers.*not keywords"):
         voice_config("sentiment.discourse_markers=['well']")
-    with pytest.raises(ConfigError, match="asr.pad_s"):
-        voice_config("asr.pad_s=-1")
+    with pytest.raises(ConfigError, match="asr.window_s"):
+        voice_config("asr.window_s=0.5")
     with pytest.raises(ConfigError, match="asr.min_avg_logprob"):
         voice_config("asr.min_avg_logprob=0.5")
 
