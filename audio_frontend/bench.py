@@ -29,8 +29,10 @@ import numpy as np
 STAGES = ("features_s", "encoder_s", "decoder_s", "rules_s")
 PROSODY_TEXTS = [("good job", "positive"), ("no, stop that", "angry"), ("yes, well done", "positive"),
                  ("bad", "angry"), ("okay", "neutral"), ("that is wrong", "angry")]
+# four decided by keywords, one by negation ("not ... right"), one by the sentiment classifier (no keyword),
+# so the classifier's cost is in the figures
 WHISPER_TEXTS = [("yes", "neutral"), ("good job", "positive"), ("no", "angry"), ("bad", "angry"),
-                 ("that was really nice", "positive"), ("you did not do that right", "angry")]
+                 ("wonderful, keep going", "positive"), ("you did not do that right", "angry")]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

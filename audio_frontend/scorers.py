@@ -129,6 +129,12 @@ class WhisperScorer:
         self.classifier = classifier
         self.sentiment_name = getattr(classifier, "name", "custom") if classifier is not None else "rules only"
 
+    def warm_up(self) -> float:
+        """Transcribe 0.5 s of silence once (allocations, thread pools); returns the seconds it took."""
+        t0 = time.perf_counter()
+        self.transcriber.transcribe(np.zeros(self.sample_rate // 2, dtype=np.float32))
+        return time.perf_counter() - t0
+
     def classify(self, text: str) -> tuple[str, float]:
         if self.classifier is None:
             raise RuntimeError("no sentiment classifier loaded")
