@@ -26,10 +26,13 @@ import time
 
 import numpy as np
 
+STAGES = ("features_s", "encoder_s", "decoder_s", "rules_s")
 PROSODY_TEXTS = [("good job", "positive"), ("no, stop that", "angry"), ("yes, well done", "positive"),
                  ("bad", "angry"), ("okay", "neutral"), ("that is wrong", "angry")]
+# four decided by keywords, one by negation ("not ... right"), one by the sentiment classifier (no keyword),
+# so the classifier's cost is in the figures
 WHISPER_TEXTS = [("yes", "neutral"), ("good job", "positive"), ("no", "angry"), ("bad", "angry"),
-                 ("that was really nice", "positive"), ("you did not do that right", "angry")]
+                 ("wonderful, keep going", "positive"), ("you did not do that right", "angry")]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -113,15 +116,18 @@ def _measure(cfg, scorer, texts, repeats: int) -> dict:
             pieces.append(x)
             t += x.size / sr
     audio = np.concatenate(pieces)
-    # warm-up (first call allocates)
+    # warm-up: the first call allocates (reported, not in the medians)
+    t_w = time.perf_counter()
     scorer.score(audio[: sr])
+    warmup_s = time.perf_counter() - t_w
     q = FeedbackQueue(maxsize=1024)
     arrivals = []
     src = ArraySource(audio, sr, cfg.audio.chunk_s, realtime=True)
     t0 = time.time() + 0.05
     src.t0 = t0
     run_listener(q, cfg, scorer, src, on_event=lambda ev, ok: arrivals.append((time.time(), ev, ok)), log=None)
-    lat, lat30, vad_wait, score_s, values = [], [], [], [], []
+    lat, lat30, vad_wait, vad_wait30, score_s, values = [], [], [], [], [], []
+    parts: dict[str, list[float]] = {k: [] for k in STAGES}
     for t_arr, ev, ok in arrivals:
         # the utterance this event belongs to: the last speech end before the segment end
         mid = (ev.t_start + ev.t_end) / 2 - t0
@@ -132,7 +138,11 @@ def _measure(cfg, scorer, texts, repeats: int) -> dict:
         lat.append(t_arr - (t0 + end))
         lat30.append(float(t_arr - (t0 + ends30[i])))
         vad_wait.append(ev.t_end - (t0 + end))
+        vad_wait30.append(float(ev.t_end - (t0 + ends30[i])))
         score_s.append(ev.details.get("score_s", float("nan")))
+        for k in STAGES:
+            if isinstance(ev.details.get(k), (int, float)):
+                parts[k].append(float(ev.details[k]))
         values.append({"value": ev.value, **{k: ev.details[k] for k in ("transcript", "rule", "valence")
                                             if k in ev.details}})
     lat = [float(v) for v in lat]
@@ -141,7 +151,12 @@ def _measure(cfg, scorer, texts, repeats: int) -> dict:
             "latency_from_30db_end_s": statistics.median(lat30) if lat30 else None,
             "latency_from_30db_end_p90_s": float(np.percentile(lat30, 90)) if lat30 else None,
             "vad_wait_median_s": statistics.median(vad_wait) if vad_wait else None,
+            "vad_wait_from_30db_end_median_s": statistics.median(vad_wait30) if vad_wait30 else None,
             "score_median_s": statistics.median(score_s) if score_s else None,
+            # where the scoring time goes (medians): Whisper's features / encoder / decoder, then the rules
+            # and sentiment; the prosody scorer has only score_s
+            "stages_median_s": {k: statistics.median(v) for k, v in parts.items() if v},
+            "warmup_s": warmup_s,
             "n_utterances": len(ends), "n_events": len(arrivals), "latencies_s": lat, "events": values,
             "queue": q.stats()}
 

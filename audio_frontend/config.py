@@ -117,6 +117,18 @@ class AsrConfig:
     compute_type: str = "int8"
     beam_size: int = 1
     max_new_tokens: int = 32
+    # faster-whisper: the encoder's input in seconds, the segment padded with silence to this length (a
+    # longer segment: its own length), instead of Whisper's fixed 30 s window (null). The encoder's cost
+    # grows with its input and a 3.5 s segment in 30 s is mostly padding; much shorter windows make
+    # Whisper loop and mishear more (docs/voice.md has the measured speed and accuracy).
+    window_s: float | None = 10.0
+    # Decoding stops after 4 + this many tokens per second of segment (a looping decoder stops early);
+    # the rule layer keeps one copy of a repeated phrase.
+    max_tokens_per_s: float = 8.0
+    initial_prompt: str = ""        # faster-whisper: text the decoder sees as what came before
+    # Transcripts whose mean token log-probability is below this give no feedback (rule `low_confidence`):
+    # a garbled transcript should give 0 rather than a wrong sign. null: off.
+    min_avg_logprob: float | None = None
     allow_download: bool = False
     threads: int = 2
 
@@ -124,6 +136,10 @@ class AsrConfig:
         check(bool(self.model.strip()), "model", "must name a model")
         check(1 <= self.beam_size <= 10, "beam_size", "must be 1..10")
         check(1 <= self.max_new_tokens <= 440, "max_new_tokens", "must be 1..440")
+        check(self.window_s is None or 1.0 <= self.window_s <= 30.0, "window_s", "must be within 1..30 s, or null")
+        check(self.max_tokens_per_s > 0.0, "max_tokens_per_s", "must be > 0")
+        check(self.min_avg_logprob is None or self.min_avg_logprob < 0.0, "min_avg_logprob",
+              "must be < 0 (a log-probability), or null")
         check(self.threads >= 1, "threads", "must be >= 1")
 
 
@@ -148,6 +164,9 @@ class SentimentConfig:
     negative: tuple[str, ...] = ("no", "nope", "bad", "wrong", "stop", "not good", "bad job", "incorrect")
     fillers: tuple[str, ...] = ("hmm", "hm", "mm", "mmm", "uh", "uhm", "um", "umm", "er", "erm", "ah",
                                 "eh", "oh")
+    # Keywords that open a longer utterance as a discourse marker ("okay, let us see", "right, now the
+    # other hand"): alone they are keywords, at the start of a sentence they are not.
+    discourse_markers: tuple[str, ...] = ("ok", "okay", "right")
 
     def validate(self) -> None:
         check(bool(self.model.strip()), "model", "must name a model")
@@ -159,6 +178,10 @@ class SentimentConfig:
         fk = {k.lower() for k in self.fillers} & ({k.lower() for k in self.affirmative}
                                                   | {k.lower() for k in self.negative})
         check(not fk, "fillers", f"fillers that are also keywords: {sorted(fk)}")
+        keywords = {k.lower() for k in self.affirmative} | {k.lower() for k in self.negative}
+        loose = sorted({k.lower() for k in self.discourse_markers} - keywords)
+        check(not loose, "discourse_markers", f"{loose} are not keywords (affirmative or negative)")
+        check(all(len(k.split()) == 1 for k in self.discourse_markers), "discourse_markers", "must be single words")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -81,6 +81,9 @@ def run_listener(queue, config, scorer, source, stop_event=None, save_dir: str |
             print(f"[voice] {scorer.source} {ev.value:+.3f} ({extra!r}) seg {seg.duration_s:.2f}s "
                   f"latency {ev.details['latency_s']:.3f}s{'' if ok else ' NOT QUEUED'}", file=log, flush=True)
 
+    warm_up = getattr(scorer, "warm_up", None)
+    if warm_up is not None:   # the first call allocates: pay for it before the first utterance, not during it
+        warm_up()
     try:
         for t, chunk in source.chunks():
             for seg in segmenter.feed(t, chunk):

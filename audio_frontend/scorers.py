@@ -117,7 +117,7 @@ class WhisperScorer:
 
         self.cfg = voice_config
         self.sample_rate = voice_config.audio.sample_rate
-        self.rules = RuleLayer.from_config(voice_config.sentiment)
+        self.rules = RuleLayer.from_config(voice_config.sentiment, voice_config.asr)
         if transcriber is None:
             from audio_frontend.models import load_transcriber
             transcriber = load_transcriber(voice_config.asr, self.sample_rate)
@@ -129,20 +129,30 @@ class WhisperScorer:
         self.classifier = classifier
         self.sentiment_name = getattr(classifier, "name", "custom") if classifier is not None else "rules only"
 
+    def warm_up(self) -> float:
+        """Transcribe 0.5 s of silence once (allocations, thread pools); returns the seconds it took."""
+        t0 = time.perf_counter()
+        self.transcriber.transcribe(np.zeros(self.sample_rate // 2, dtype=np.float32))
+        return time.perf_counter() - t0
+
     def classify(self, text: str) -> tuple[str, float]:
         if self.classifier is None:
             raise RuntimeError("no sentiment classifier loaded")
         return self.classifier(text)
 
     def score(self, audio: np.ndarray) -> tuple[float, dict]:
+        from audio_frontend.models import transcript_of
+
         t0 = time.perf_counter()
-        text = self.transcriber.transcribe(np.asarray(audio, dtype=np.float32))
+        tr = transcript_of(self.transcriber, np.asarray(audio, dtype=np.float32))
         t1 = time.perf_counter()
-        d = self.rules.decide(text, self.classify if self.classifier is not None else None)
-        return d.value, {"transcript": text, "rule": d.rule, "label": d.label, "label_score": d.score,
+        d = self.rules.decide(tr.text, self.classify if self.classifier is not None else None, tr.avg_logprob)
+        t2 = time.perf_counter()
+        return d.value, {"transcript": tr.text, "rule": d.rule, "label": d.label, "label_score": d.score,
+                         "avg_logprob": tr.avg_logprob, "no_speech_prob": tr.no_speech_prob,
                          "sentiment": self.sentiment_name, "asr_model": self.cfg.asr.model,
-                         "asr_backend": self.cfg.asr.backend, "asr_s": t1 - t0,
-                         "score_s": time.perf_counter() - t0}
+                         "asr_backend": self.cfg.asr.backend, "asr_s": t1 - t0, **tr.timings,
+                         "rules_s": t2 - t1, "score_s": time.perf_counter() - t0}
 
 
 def make_scorer(voice_config, scorer: str, **kw):

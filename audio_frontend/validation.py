@@ -13,6 +13,7 @@ from pathlib import Path
 
 from audio_frontend.errors import AudioInputError
 from audio_frontend.labelled import LABELS_FILE, Scored, find_labelled, load_labelled, score_loaded
+from audio_frontend.models import transcript_of
 from audio_frontend.report import summarize
 
 
@@ -58,14 +59,14 @@ def _whisper_rows(loaded, transcriber, rules, classifiers: dict) -> dict[str, li
                 out[name].append(Scored(str(path), lab, error=utt))
             continue
         t0 = time.perf_counter()
-        text = transcriber.transcribe(utt.audio)
+        tr = transcript_of(transcriber, utt.audio)
         asr_s = time.perf_counter() - t0
         for name, clf in classifiers.items():
             t1 = time.perf_counter()
-            d = rules.decide(text, clf)
+            d = rules.decide(tr.text, clf, tr.avg_logprob)
             out[name].append(Scored(str(path), lab, d.value, asr_s + time.perf_counter() - t1,
-                                    {"transcript": text, "rule": d.rule}, speech_s=utt.speech_s,
-                                    vad_wait_s=utt.vad_wait_s))
+                                    {"transcript": tr.text, "rule": d.rule, "avg_logprob": tr.avg_logprob,
+                                     **tr.timings}, speech_s=utt.speech_s, vad_wait_s=utt.vad_wait_s))
     return out
 
 
@@ -87,7 +88,7 @@ def validate_speakers(root: str | Path, cfg, scorers=("prosody", "whisper"), log
             from audio_frontend.models import load_text_classifier
             classifiers["whisper+distilbert"] = PipelineClassifier(load_text_classifier(cfg.sentiment),
                                                                    cfg.sentiment.model)
-        whisper = (load_transcriber(cfg.asr, cfg.audio.sample_rate), RuleLayer.from_config(cfg.sentiment),
+        whisper = (load_transcriber(cfg.asr, cfg.audio.sample_rate), RuleLayer.from_config(cfg.sentiment, cfg.asr),
                    classifiers)
     for spk in speakers:
         test = spk / "test"

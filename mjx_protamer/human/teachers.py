@@ -20,9 +20,9 @@ Giving model
 Channels (per modality)
     keyboard: exact +-1, fast (0.35 +- 0.1 s reaction, no processing latency);
     prosody: continuous, noisy: tanh(gain * score + Normal(0, noise_std)) (0.6 s reaction, 0.87 s
-        utterance, 0.37 s pipeline latency);
+        utterance, 0.40 s pipeline latency);
     speech: +1 / 0 / -1 through a confusion matrix (rows intended +1/0/-1, columns recognised), longer
-        latency (0.8 s reaction, 0.87 s utterance, 1.02 s transcription).
+        latency (0.8 s reaction, 0.87 s utterance, 0.60 s transcription).
     The numbers and their sources (measured on our voice pipelines, or assumed) are in `channels.py`.
 
 Two variants share `teacher_step`:

@@ -137,3 +137,26 @@ def test_listen_command_on_a_wav_and_missing_calibration(tiny_models, speech, tm
     assert run_cli("listen", "--wav", str(empty), "--set", "prosody.kind=wav2vec2", "--set", model,
                    "--set", "prosody.tau=0.5") == 3
     assert "empty" in capsys.readouterr().err
+
+
+def test_the_listener_warms_the_scorer_up_before_the_first_utterance():
+    """Whisper's first call allocates (0.5-0.9 s measured); the listener pays it before listening."""
+    from audio_frontend.listen import run_listener
+    from audio_frontend.scorers import WhisperScorer
+    from audio_frontend.sources import ArraySource
+
+    calls = []
+
+    class Recorder:
+        def transcribe(self, audio):
+            calls.append(audio.size)
+            return "good job"
+
+    cfg = voice_config("sentiment.kind=vader")
+    scorer = WhisperScorer(cfg, transcriber=Recorder(), load_classifier=False)
+    x = np.concatenate([np.zeros(SR, np.float32), 0.3 * np.sin(np.arange(SR) * 0.1).astype(np.float32),
+                        np.zeros(SR, np.float32)])
+    events = []
+    run_listener(None, cfg, scorer, ArraySource(x, SR, 0.25), on_event=lambda ev, ok: events.append(ev), log=None)
+    assert calls[0] == SR // 2 and len(calls) == 2          # the warm-up on silence, then the utterance
+    assert [e.value for e in events] == [1.0]

@@ -130,3 +130,24 @@ def test_packaged_whisper_tiny_en_on_synthesised_speech(packaged_whisper, speech
     scorer = WhisperScorer(voice_config(), transcriber=packaged_whisper, load_classifier=False)
     value, d = scorer.score(x)
     assert (value, d["rule"]) == (sign, "keyword"), d
+
+
+def test_packaged_whisper_encodes_a_short_window_not_30_s(packaged_whisper, speech):
+    """The encoder sees the segment padded to asr.window_s (CTranslate2 takes a shorter mel), a longer
+    segment whole; null is Whisper's 30 s window. Each hears the keyword; the decoder's confidence comes
+    with the text."""
+    from audio_frontend.models import FasterWhisperTranscriber
+    from audio_frontend.rules import words_of
+    from audio_frontend.synth import with_silence
+
+    x = with_silence(speech["good job"], 0.25, 0.25)
+    tr = packaged_whisper.transcribe_scored(x)
+    assert packaged_whisper.cfg.window_s == 10.0 and tr.timings["encoder_frames"] == 1000
+    assert "good job" in " ".join(words_of(tr.text)), tr
+    assert tr.avg_logprob is not None and -3.0 < tr.avg_logprob < 0.0 and 0.0 <= tr.no_speech_prob <= 1.0
+    for window, frames in (("null", 3000), ("1.0", x.size // 160)):
+        other = FasterWhisperTranscriber(voice_config(f"asr.window_s={window}").asr).transcribe_scored(x)
+        assert other.timings["encoder_frames"] == frames, (window, other)
+        assert "good job" in " ".join(words_of(other.text)), (window, other)
+    # decoding stops after 4 + max_tokens_per_s tokens per second: a looping decoder cannot run to 32
+    assert packaged_whisper.max_new_tokens(0.5) == 8 and packaged_whisper.max_new_tokens(10.0) == 32

@@ -2,7 +2,7 @@
 
 import pytest
 
-from audio_frontend.rules import RuleLayer, words_of
+from audio_frontend.rules import RuleLayer, collapse_repeats, words_of
 from mjx_protamer.config import ConfigError
 from voice_helpers import voice_config
 
@@ -35,13 +35,12 @@ def test_other_sentences_go_to_the_classifier(rules):
 
     def classify(text):
         seen.append(text)
-        return ("NEGATIVE", 0.9) if "not" in text else ("POSITIVE", 0.8)
-    assert rules.decide("That was not nice", classify).value == -1
+        return ("NEGATIVE", 0.9) if "hate" in text else ("POSITIVE", 0.8)
+    assert rules.decide("I hate that", classify).value == -1
     d = rules.decide("Hmm, you touched your hand", classify)
     assert (d.value, d.rule, d.label) == (1, "classifier", "POSITIVE")
-    assert seen == ["that was not nice", "you touched your hand"]   # fillers removed before classifying
+    assert seen == ["i hate that", "you touched your hand"]   # fillers removed before classifying
     assert rules.decide("yes and no I think", classify).rule == "classifier"   # keywords of both signs
-    assert rules.decide("that is not bad", classify).rule == "classifier"      # a negator turns keywords around
     # a classifier that says neither (VADER below its threshold) gives no feedback
     d = rules.decide("something else", lambda t: ("NEUTRAL", 0.01))
     assert (d.value, d.rule, d.label) == (0, "classifier", "NEUTRAL")
@@ -83,3 +82,81 @@ def test_config_validation_names_the_field():
         voice_config("prosody.tau=0")
     with pytest.raises(ConfigError, match="vad.kind"):
         voice_config("vad.kind=energy")
+    with pytest.raises(ConfigError, match="sentiment.discourse_markers.*not keywords"):
+        voice_config("sentiment.discourse_markers=['well']")
+    with pytest.raises(ConfigError, match="asr.window_s"):
+        voice_config("asr.window_s=0.5")
+    with pytest.raises(ConfigError, match="asr.min_avg_logprob"):
+        voice_config("asr.min_avg_logprob=0.5")
+
+
+@pytest.mark.parametrize("text,value,rule", [
+    ("That is not right.", -1, "keyword_vote"),            # a negated affirmative is reproach
+    ("You did not do that right.", -1, "keyword_vote"),    # three words after the negator are in its scope
+    ("That was not good at all.", -1, "keyword_vote"),     # the phrase "not good" itself
+    ("I don't think that's good.", -1, "keyword_vote"),
+    ("Not bad.", 0, "negated_negative"),                   # mild and easily misheard: no feedback, not praise
+    ("Not really bad.", 0, "negated_negative"),            # what Whisper made of "that is really bad"
+    ("Don't stop.", 0, "negated_negative"),
+    ("Don't worry, you are doing good.", 1, "keyword_vote"),   # "good" is out of the negator's reach
+    ("No, that's not right.", -1, "keyword_vote"),
+])
+def test_negation_turns_the_keywords_it_reaches(rules, text, value, rule):
+    d = rules.decide(text, never)
+    assert (d.value, d.rule) == (value, rule), d
+
+
+@pytest.mark.parametrize("text", ["Don't do that!", "Do not touch it.", "don't, uh, do it"])
+def test_an_utterance_that_opens_with_dont_forbids(rules, text):
+    d = rules.decide(text, never)
+    assert (d.value, d.rule) == (-1, "prohibitive"), d
+
+
+def test_an_opening_discourse_marker_is_not_praise(rules):
+    seen = []
+
+    def classify(text):
+        seen.append(text)
+        return "NEUTRAL", 0.0
+    # "okay" alone is a keyword; opening a sentence it is a discourse marker, left out of what is classified
+    assert rules.decide("Okay.", never).value == 1
+    d = rules.decide("Okay, let us see.", classify)
+    assert (d.value, d.rule) == (0, "classifier") and seen == ["let us see"]
+    assert rules.decide("Right, now the other hand.", classify).value == 0 and seen[-1] == "now the other hand"
+    assert rules.decide("That's right!", never).value == 1   # not at the start: the keyword counts
+    assert rules.decide("Okay, good job.", never).value == 1
+
+
+@pytest.mark.parametrize("words,kept", [
+    ("you did it you did it you did it you", "you did it"),   # Whisper looping, cut mid-copy at its token limit
+    ("uh uh uh uh uh", "uh"),
+    ("no no no", "no"),
+    ("stop it out stop it out stop it out stop", "stop it out"),
+    ("good job", "good job"),
+    ("that is what it is", "that is what it is"),              # a word said twice apart is no repeat
+])
+def test_collapse_repeats(words, kept):
+    assert " ".join(collapse_repeats(words.split())) == kept
+
+
+def test_a_looping_transcript_is_decided_on_one_copy(rules):
+    seen = []
+
+    def classify(text):
+        seen.append(text)
+        return "POSITIVE", 0.9
+    d = rules.decide("You did it... You did it... You did it... You", classify)
+    assert d.value == 1 and seen == ["you did it"]
+    assert rules.decide("uh uh uh uh uh uh uh uh", never).rule == "filler"
+
+
+def test_low_confidence_transcripts_give_no_feedback():
+    gated = RuleLayer.from_config(voice_config().sentiment, voice_config("asr.min_avg_logprob=-1.0").asr)
+    d = gated.decide("That was all I really want to do.", never, avg_logprob=-1.3)
+    assert (d.value, d.rule, d.score) == (0, "low_confidence", -1.3)
+    assert gated.decide("Good job.", never, avg_logprob=-0.4).value == 1
+    assert gated.decide("Good job.", never, avg_logprob=None).value == 1   # a backend without scores: no gate
+    assert gated.decide("Um...", never, avg_logprob=-3.0).rule == "filler"
+    # off by default
+    assert RuleLayer.from_config(voice_config().sentiment, voice_config().asr).decide(
+        "Good job.", never, avg_logprob=-5.0).value == 1

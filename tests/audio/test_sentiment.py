@@ -29,7 +29,11 @@ def vader_scorer():
     ("No wrong way", -1, "keyword_vote"),              # keywords of one polarity decide
     ("Stop it now!", -1, "keyword_vote"),
     ("Yes, that was great.", 1, "keyword_vote"),
-    ("That was not good at all.", -1, "classifier"),   # a negator: the classifier reads the negation
+    ("That was not good at all.", -1, "keyword_vote"),  # the negated keyword decides
+    ("It was not nice.", -1, "keyword_vote"),
+    ("Don't do that!", -1, "prohibitive"),
+    ("Okay, let us see.", 0, "classifier"),            # VADER's "okay" is +0.9; an opening marker is left out
+    ("I hate to not.", -1, "classifier"),
     ("Look at the hand.", 0, "classifier"),            # VADER neutral: no feedback
     ("Um...", 0, "filler"),
     ("good job", 1, "keyword"),
