@@ -58,8 +58,9 @@ def event_for(seg: Segment, scorer, value: float, details: dict, t_done: float) 
 
 
 def run_listener(queue, config, scorer, source, stop_event=None, save_dir: str | None = None,
-                 max_events: int | None = None, on_event=None, log=sys.stderr) -> dict:
-    """Blocking loop (in this process). `scorer` is a loaded scorer object. Returns counters."""
+                 max_events: int | None = None, on_event=None, log=sys.stderr, ready_event=None) -> dict:
+    """Blocking loop (in this process). `scorer` is a loaded scorer object. Returns counters.
+    `ready_event` (a multiprocessing Event) is set once the scorer is warm, just before listening."""
     a = config.audio
     segmenter = Segmenter(config.vad, a.sample_rate, a.chunk_s)
     save_dir = save_dir if save_dir is not None else (config.listen.save_segments_dir or None)
@@ -84,6 +85,8 @@ def run_listener(queue, config, scorer, source, stop_event=None, save_dir: str |
     warm_up = getattr(scorer, "warm_up", None)
     if warm_up is not None:   # the first call allocates: pay for it before the first utterance, not during it
         warm_up()
+    if ready_event is not None:
+        ready_event.set()
     try:
         for t, chunk in source.chunks():
             for seg in segmenter.feed(t, chunk):
@@ -100,13 +103,13 @@ def run_listener(queue, config, scorer, source, stop_event=None, save_dir: str |
     return stats
 
 
-def _listener_main(queue, config, scorer_name, source, stop_event, save_dir, scorer_kwargs):
+def _listener_main(queue, config, scorer_name, source, stop_event, save_dir, scorer_kwargs, ready_event=None):
     try:
         from audio_frontend.scorers import make_scorer
 
         scorer = make_scorer(config, scorer_name, **(scorer_kwargs or {}))
         print(f"[voice] listening ({scorer_name}); events go to the feedback queue", file=sys.stderr, flush=True)
-        run_listener(queue, config, scorer, source, stop_event=stop_event, save_dir=save_dir)
+        run_listener(queue, config, scorer, source, stop_event=stop_event, save_dir=save_dir, ready_event=ready_event)
     except VoiceError as e:
         print(f"[voice] listener stopped: {e}", file=sys.stderr, flush=True)
         sys.exit(e.exit_code)
@@ -115,13 +118,16 @@ def _listener_main(queue, config, scorer_name, source, stop_event, save_dir, sco
 
 
 def start_listener(queue, config, scorer: str = "prosody", source=None, save_dir: str | None = None,
-                   stop_event=None, scorer_kwargs: dict | None = None, ctx=None) -> mp.Process:
+                   stop_event=None, scorer_kwargs: dict | None = None, ctx=None, ready_event=None) -> mp.Process:
     """Start the voice listener as a daemon host process and return it.
 
     queue: a `mjx_protamer.human.queue.FeedbackQueue`; config: a `VoiceConfig`; scorer: "prosody" or
     "whisper"; source: an AudioSource (default: the microphone from config.audio); save_dir: save each
     scored segment as WAV there (default config.listen.save_segments_dir); stop_event: a multiprocessing
-    Event that ends the loop (else terminate the process). Check `proc.is_alive()` / `proc.exitcode`.
+    Event that ends the loop (else terminate the process); ready_event: a multiprocessing Event the listener
+    sets once its model is loaded and warm (loading torch and a model takes seconds, a minute on a busy
+    machine: a learner that says "speak now" before that loses what is said). Check `proc.is_alive()` /
+    `proc.exitcode`.
     """
     if scorer not in ("prosody", "whisper"):
         raise ValueError(f"unknown scorer {scorer!r}; use 'prosody' or 'whisper'")
@@ -130,7 +136,7 @@ def start_listener(queue, config, scorer: str = "prosody", source=None, save_dir
         source = make_source(config)
     ctx = ctx or mp.get_context("spawn")
     proc = ctx.Process(target=_listener_main, name=f"voice-{scorer}", daemon=True,
-                       args=(queue, config, scorer, source, stop_event, save_dir, scorer_kwargs))
+                       args=(queue, config, scorer, source, stop_event, save_dir, scorer_kwargs, ready_event))
     proc.start()
     return proc
 

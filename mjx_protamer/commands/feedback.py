@@ -49,6 +49,8 @@ from pathlib import Path
 LIVE = ("keyboard", "prosody", "whisper", "web")
 FEEDBACK_CHOICES = ("keyboard", "prosody", "whisper", "web", "simulated:keyboard", "simulated:prosody",
                     "simulated:speech", "none")
+# How long a live session waits for the voice listener to load torch and its model before going on.
+LISTENER_LOAD_TIMEOUT_S = 300.0
 
 
 def register(subparsers) -> None:
@@ -419,13 +421,16 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                         from audio_frontend.listen import start_listener
                         vcfg, source = voice
                         stop_event = mp.get_context("spawn").Event()
+                        ready_event = mp.get_context("spawn").Event()
                         listener = start_listener(run.queue, vcfg, scorer=args.feedback, source=source,
                                                   save_dir=args.save_segments or str(out / "segments"),
-                                                  stop_event=stop_event, scorer_kwargs=(
+                                                  stop_event=stop_event, ready_event=ready_event, scorer_kwargs=(
                                                       {"load_classifier": False} if args.keywords_only
                                                       and args.feedback == "whisper" else None))
                         print(f"[finetune] voice listener ({args.feedback}, {args.listen_source}) started, pid "
-                              f"{listener.pid}; its lines start with [voice]", flush=True)
+                              f"{listener.pid}; its lines start with [voice]; waiting for it to load its model",
+                              flush=True)
+                        _wait_for_listener(listener, ready_event)
                     if live:
                         how = (" (+ good, - bad, 0 neutral, q quit)" if keys is not None else
                                " (the page's + / - / 0)" if args.feedback == "web" else " (speak)")
@@ -526,6 +531,18 @@ def _warm_up(run, learner: str) -> None:
                  np.zeros(n, np.float32), np.zeros(n, np.float32))
         jax.block_until_ready(m._update(m.params, m.opt_state, *map(jnp.asarray, batch)))
 
+
+
+def _wait_for_listener(listener, ready_event, timeout_s: float = LISTENER_LOAD_TIMEOUT_S) -> None:
+    """Hold the session until the voice listener is ready to hear (or has died: its exit is reported by the
+    session loop). What a person says before the model is loaded would be lost, and "give feedback now"
+    would be untrue."""
+    t0 = time.time()
+    while not ready_event.is_set() and listener.is_alive() and time.time() - t0 < timeout_s:
+        ready_event.wait(0.2)
+    if listener.is_alive() and not ready_event.is_set():
+        print(f"[finetune] note: the voice listener is still loading after {timeout_s:.0f} s; going on, its "
+              "events will arrive once it is ready", flush=True)
 
 def _print_chunk(run, m, learner: str) -> None:
     if learner == "coach":
