@@ -199,8 +199,8 @@ def _bench_native_host_loop(native_env, batch: int, steps: int, repeats: int, se
     def run():
         s = holder[0]
         for a in actions:
-            *out, _ = physics.step(np.asarray(s.data.state), a)
-            s = post(s, unpack(physics, *out), a)
+            bits, packed, _ = physics.step(np.asarray(s.data.state), a)
+            s = post(s, unpack(physics, bits, packed), a)
         jax.block_until_ready(s.reward)
         holder[0] = s
 

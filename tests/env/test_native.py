@@ -56,10 +56,7 @@ def test_contact_sensors_give_mujocos_contacts(native_env):
     d = mujoco.MjData(m)
     hand, region = native_env.model.sensing.geom_hand, native_env.model.sensing.geom_region
     states = list(_random_states(m, native_env.model, 300, seed=4))
-    from mjx_protamer.envs.native_env import unpack
-
-    out = unpack(phys, *phys.forward(phys.state_rows(*(np.array(x) for x in zip(*states)))))
-    geom, pos, dist, force = out.contact_geom, out.contact_pos, out.contact_dist, out.contact_force
+    geom, pos, dist, force = phys.forward_contacts(phys.state_rows(*(np.array(x) for x in zip(*states))))
     with_contact = 0
     for i, (qpos, qvel, ctrl, ws) in enumerate(states):
         d.qpos[:], d.qvel[:], d.ctrl[:], d.qacc_warmstart[:] = qpos, qvel, ctrl, ws
@@ -128,7 +125,8 @@ def test_one_step_agrees_with_mjx_at_the_converged_solver(eq_mjx_env, eq_twin):
     from mjx_protamer.envs.native_physics import NativePhysics
 
     env = eq_mjx_env
-    phys = NativePhysics(env.model, env.config.physics, n_contacts=env.config.physics.max_contact_points)
+    phys = NativePhysics(env.model, env.config.physics, n_contacts=env.config.physics.max_contact_points,
+                         touch_k=env.config.k)
     rng = np.random.default_rng(5)
     states, actions, touching = [], [], 0
     for ep in range(3):
@@ -146,8 +144,8 @@ def test_one_step_agrees_with_mjx_at_the_converged_solver(eq_mjx_env, eq_twin):
     states = [np.array(x) for x in zip(*states)]
     actions = np.array(actions)
     rows = phys.state_rows(*states)
-    bits, packed, geom, bad = phys.step(phys.rows_to_bits(rows), actions)
-    stepped = unpack(phys, bits, packed, geom)
+    bits, packed, bad = phys.step(phys.rows_to_bits(rows), actions)
+    stepped = unpack(phys, bits, packed)
     qpos_n, qvel_n = stepped.qpos, stepped.qvel
 
     @jax.jit
