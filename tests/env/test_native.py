@@ -2,6 +2,8 @@
 
 What each test pins down:
 - the contact sensors give exactly MuJoCo's own contacts (`d.contact` + `mj_contactForce`), deepest first;
+- the host senses a batch at once (only the worlds in contact) exactly as `sensing.sense` senses each
+  world, including worlds with more contacts than the capacity (the deepest count);
 - the jitted native env (callback inside `lax.scan`, resets from the pool) reproduces the NumPy twin's
   trajectory: physics bit for bit (both are `mj_step` in float64), so qpos agrees to float32 rounding and
   the observation, regions and reward (sensing in float32 here, float64 there) to float32 precision;
@@ -73,6 +75,49 @@ def test_contact_sensors_give_mujocos_contacts(native_env):
             np.testing.assert_allclose(pos[i, slot], p[j], rtol=1e-6, atol=1e-7)
             np.testing.assert_allclose(force[i, slot], f[j], rtol=1e-5, atol=1e-5)
     assert with_contact >= 30, with_contact
+
+
+@pytest.mark.parametrize("n_contacts", [8, 2])
+def test_host_sensing_of_a_batch_equals_sense_per_world(native_env, n_contacts):
+    """The callback senses a batch at once, only the worlds in contact, grouped by their number of
+    contacts: on 300 random poses (worlds with 0 to 8 self-contacts) its touch features and region masks
+    equal `sensing.sense` run world by world on that world's `n_contacts` deepest contacts, bit for bit.
+    With capacity 2, worlds with more contacts exist and count only their 2 deepest (MJX's rule)."""
+    import mujoco
+
+    from mjx_protamer.envs import sensing
+    from mjx_protamer.envs.native_env import unpack
+    from mjx_protamer.envs.native_physics import FEW_CONTACTS, NativePhysics
+
+    phys = NativePhysics(native_env.model, native_env.config.physics, n_contacts=n_contacts,
+                         touch_k=native_env.config.k)
+    m = phys.mj_model
+    rows = phys.state_rows(*(np.array(x) for x in zip(*_random_states(m, native_env.model, 300, seed=4))))
+    out = unpack(phys, *phys.forward(rows))
+    geom, pos, dist, force = phys.forward_contacts(rows)
+    counts = np.count_nonzero(dist < 0, axis=1)
+    assert ((counts > 0) & (counts <= FEW_CONTACTS)).any()
+    if n_contacts > FEW_CONTACTS:
+        assert (counts > FEW_CONTACTS).any(), "the group of worlds with many contacts was not exercised"
+    else:
+        d = mujoco.MjData(m)
+        over = 0
+        for row in rows:
+            mujoco.mj_setState(m, d, row, mujoco.mjtState.mjSTATE_INTEGRATION)
+            mujoco.mj_forward(m, d)
+            over += np.count_nonzero(d.sensordata.reshape(-1, 8)[:, 4] < 0) > n_contacts
+        assert over >= 5, f"only {over} worlds with more than {n_contacts} contacts"
+    tables = native_env.model.sensing.as_xp(np)
+    for i, row in enumerate(rows):
+        d = mujoco.MjData(m)
+        mujoco.mj_setState(m, d, row, mujoco.mjtState.mjSTATE_INTEGRATION)
+        mujoco.mj_forward(m, d)
+        touch, main, extended = sensing.sense(np, tables, native_env.config.k, geom[i], pos[i], dist[i], force[i],
+                                              d.geom_xpos, d.geom_xmat.reshape(-1, 3, 3))
+        np.testing.assert_array_equal(out.touch[i], touch.astype(np.float32), err_msg=f"world {i}")
+        np.testing.assert_array_equal(out.region_mask[i], main, err_msg=f"world {i}")
+        np.testing.assert_array_equal(out.extended_region_mask[i], extended, err_msg=f"world {i}")
+    assert (np.abs(out.touch).sum(axis=1) > 0).sum() >= 30
 
 
 @pytest.fixture(scope="module")
