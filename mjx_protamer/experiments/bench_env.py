@@ -7,9 +7,10 @@ One run measures, on this machine:
   median of `--repeats` timed chunks;
 - MJX physics-only steps/s: vmapped `mjx.step` under the same scan, same model, at batch 256;
 - native full env steps/s (`NativeSelfTouchEnv`: native MuJoCo through one `jax.pure_callback` per
-  vectorised step, sensing and reward in JAX), the same wrapped chunk at each batch size, and its compile;
+  vectorised step, touch sensing on the host in the same call, reward and observation in JAX), the same
+  wrapped chunk at each batch size, and its compile;
 - native physics-only steps/s through `mujoco.batch` (the native env's engine: state rows in, step, the
-  bound outputs copied out) at batch 256, beside `mujoco.rollout`;
+  outputs the env reads, touch sensing included, copied out) at batch 256, beside `mujoco.rollout`;
 - the alternative to the callback: a Python loop that steps the native physics on the host and calls a
   jitted post-physics step (sensing, reward, wrappers) per vectorised step (`native_host_loop_steps_per_s`);
 - native MuJoCo physics-only steps/s: `mujoco.rollout.rollout` on all cores (one MjData per thread);
@@ -156,7 +157,7 @@ def _bench_mjx_physics(env, batch: int, steps: int, repeats: int, seed: int = 0)
 
 # --- native C and the NumPy twin -----------------------------------------------------------------------
 def _bench_native_batch_physics(native_env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
-    """`NativePhysics.step` alone (mujoco.batch, the outputs the env reads copied out), host loop."""
+    """`NativePhysics.step` alone (mujoco.batch, the outputs the env reads, host sensing included), host loop."""
     physics = native_env.physics
     bits = np.tile(np.asarray(native_env.init_data.state), (batch, 1))
     actions = np.random.default_rng(seed).uniform(-1, 1, (steps, batch, native_env.action_size)).astype(np.float32)
