@@ -10,7 +10,8 @@ One run measures, on this machine:
   vectorised step, touch sensing on the host in the same call, reward and observation in JAX), the same
   wrapped chunk at each batch size, and its compile;
 - native physics-only steps/s through `mujoco.batch` (the native env's engine: state rows in, step, the
-  outputs the env reads, touch sensing included, copied out) at batch 256, beside `mujoco.rollout`;
+  outputs the env reads copied out, touch sensing left out) at batch 256, beside `mujoco.rollout`, and
+  the same with the host's touch sensing (`native_batch_physics_and_sensing_steps_per_s`);
 - the alternative to the callback: a Python loop that steps the native physics on the host and calls a
   jitted post-physics step (sensing, reward, wrappers) per vectorised step (`native_host_loop_steps_per_s`);
 - native MuJoCo physics-only steps/s: `mujoco.rollout.rollout` on all cores (one MjData per thread);
@@ -26,6 +27,7 @@ Timings are wall-clock on a shared machine: other processes' load shows up in th
 from __future__ import annotations
 
 import argparse
+import copy
 from pathlib import Path
 import dataclasses
 import os
@@ -156,9 +158,17 @@ def _bench_mjx_physics(env, batch: int, steps: int, repeats: int, seed: int = 0)
 
 
 # --- native C and the NumPy twin -----------------------------------------------------------------------
-def _bench_native_batch_physics(native_env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
-    """`NativePhysics.step` alone (mujoco.batch, the outputs the env reads, host sensing included), host loop."""
+def _bench_native_batch_physics(native_env, batch: int, steps: int, repeats: int, seed: int = 0,
+                                sense: bool = True) -> dict:
+    """`NativePhysics.step` alone (mujoco.batch, the outputs the env reads copied out), host loop; with
+    `sense=False` without the host's touch sensing (zeros in its place): the physics alone."""
+    from mjx_protamer.envs.sensing import N_EXTENDED, N_REGIONS
+
     physics = native_env.physics
+    if not sense:
+        physics = copy.copy(physics)
+        physics._batches = {}
+        physics._sense = lambda b: (np.zeros((b.nsim, physics.touch_size)), np.zeros((b.nsim, N_REGIONS + N_EXTENDED)))
     bits = np.tile(np.asarray(native_env.init_data.state), (batch, 1))
     actions = np.random.default_rng(seed).uniform(-1, 1, (steps, batch, native_env.action_size)).astype(np.float32)
     holder = [bits]
@@ -356,8 +366,10 @@ def run_env_benchmark(args) -> dict:
 
     native_env = NativeSelfTouchEnv(env.config)
     report.update(_env_sweep("native", native_env, sizes, steps, repeats))
-    batch_phys = _bench_native_batch_physics(native_env, physics_batch, steps, repeats)
+    batch_phys = _bench_native_batch_physics(native_env, physics_batch, steps, repeats, sense=False)
     report["native_batch_physics_steps_per_s"] = batch_phys["steps_per_s"]
+    report["native_batch_physics_and_sensing_steps_per_s"] = _bench_native_batch_physics(
+        native_env, physics_batch, steps, repeats)["steps_per_s"]
     report["native_batch_physics_threads"] = batch_phys["nthread"]
     report["native_host_loop_steps_per_s"] = _bench_native_host_loop(native_env, physics_batch, steps,
                                                                      repeats)["steps_per_s"]
