@@ -227,6 +227,10 @@ def _finetune(args: argparse.Namespace) -> int:
             raise
         return _fail(f"--checkpoint {ckpt} cannot be restored (corrupt, incomplete, or from another version of "
                      f"the config): {type(e).__name__}: {e}")
+    if not args.resume:
+        loaded = _live_env(*loaded)
+    elif _recorded_backend(args.out):  # the env the session recorded (COACH resumes from the pretrain config)
+        loaded = _live_env(*loaded, _recorded_backend(args.out))
     return _session(args, live, voice, *loaded)
 
 
@@ -234,6 +238,33 @@ def _load(args, ckpt: Path):
     """(pretrain config, env, loaded train state, step)."""
     from mjx_protamer.experiments.run_loader import load_run
     return load_run(ckpt)
+
+
+def _live_env(pre, env, loaded, step, backend: str | None = None):
+    """The loaded checkpoint with the live env in place of the checkpoint's: one world on the backend that
+    steps it fastest here (or `backend`, the one a recorded session used), and the config that says so
+    (saved as the session's config.yaml and its manifest's `env_backend`)."""
+    from mjx_protamer.experiments.env_factory import live_config, make_live_env
+
+    if pre.env_name != "self_touch":
+        return pre, env, loaded, step
+    how = "recorded by the session" if backend else "the fastest for one world here"
+    if live_config(pre, backend).env.backend == pre.env.backend == getattr(env, "backend", None):
+        print(f"[finetune] physics backend: {pre.env.backend} ({how})", flush=True)
+        return pre, env, loaded, step  # the loaded env is already the one
+    env, pre = make_live_env(pre, backend)
+    print(f"[finetune] physics backend: {pre.env.backend} ({how})", flush=True)
+    return pre, env, loaded, step
+
+
+def _recorded_backend(session: Path) -> str | None:
+    """The physics backend a recorded session's live env ran on (None for sessions recorded before the
+    live env had its own: they ran on the checkpoint's)."""
+    import json
+
+    from mjx_protamer.human.session_record import MANIFEST
+
+    return json.loads((session / MANIFEST).read_text()).get("env_backend")
 
 
 def _with_feedback_channel(fb, feedback: str):
@@ -371,6 +402,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     "seeds": {"train": pre.train.seed, "feedback": fb.seed},
                     "feedback_config": to_dict(fb), "listen_source": args.listen_source,
                     "segments": str(args.save_segments or (out / "segments")) if voice is not None else None,
+                    "env_backend": pre.env.backend if pre.env_name == "self_touch" else None,
                     "started": time.time(), **_checkpoint_identity(Path(args.checkpoint), step)}
     recorder = SessionRecorder(out)
     write_json_atomic(out / MANIFEST, manifest)

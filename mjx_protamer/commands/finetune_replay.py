@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mjx_protamer.commands.feedback import _build_run, _fail, _load, _save, _with_feedback_channel
+from mjx_protamer.commands.feedback import _build_run, _fail, _live_env, _load, _save, _with_feedback_channel
 
 
 def replay(args) -> int:
@@ -47,6 +47,8 @@ def replay(args) -> int:
 
     _enable_compile_cache()
     pre, env, loaded, step = _load(args, step_dir)
+    if manifest.get("env_backend"):  # sessions recorded before the live env had its own backend ran on the
+        pre, env, loaded, step = _live_env(pre, env, loaded, step, manifest["env_backend"])  # checkpoint's
     fb = _with_feedback_channel(load_feedback_config(manifest["config"], manifest["overrides"]).feedback,
                                 manifest["feedback"])
     args.out.mkdir(parents=True, exist_ok=True)

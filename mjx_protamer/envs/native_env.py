@@ -4,13 +4,15 @@ Same env as `SelfTouchEnv` (same observation, regions, reward, reset pool, NaN i
 pure `reset`/`step` on a `State`), but the physics step is native C MuJoCo (`mujoco.batch`, float64,
 the engine's own threads) reached through `jax.pure_callback`: under `VmapWrapper` a whole batch of
 worlds is one callback per vectorised step (`vmap_method="broadcast_all"`), so the chunk stays one
-jitted program and sensing, reward and learning remain JAX. On a CPU this is about ten times faster than
+jitted program; touch sensing runs on the host in the same call (the shared
+`sensing.sense`, on the worlds in contact only), reward, observation and learning remain JAX. On a CPU this is about ten times faster than
 MJX (docs/environment.md); on an accelerator every step would cross to the host, so MJX stays there.
 
 A world's physics state is `NativeData.state`: its float64 integration-state row carried bit for bit
 (as uint32 pairs), so a trajectory equals the NumPy twin's (`mj_step` on one MjData) exactly. The other
-fields are what the step's forward pass computed, float32, as the MJX env reads them from `mjx.Data`:
-qpos and qvel after the step, actuator forces, geom frames and the deepest self-contacts before it.
+fields are what the env's step reads, float32: qpos and qvel after the step, actuator forces, and the
+touch features and region masks that the host sensed (in float64, the shared `sensing.sense`, only on
+the worlds in contact) from the deepest self-contacts and geom frames of the step's forward pass.
 """
 
 from __future__ import annotations
@@ -31,15 +33,12 @@ class NativeData:
     qpos: jax.Array
     qvel: jax.Array
     actuator_force: jax.Array
-    geom_xpos: jax.Array  # (ngeom, 3)
-    geom_xmat: jax.Array  # (ngeom, 3, 3)
-    contact_geom: jax.Array  # (n_contacts, 2) int32, deepest self-contacts first
-    contact_pos: jax.Array  # (n_contacts, 3)
-    contact_dist: jax.Array  # (n_contacts,) penetration; >= 0 for an empty slot
-    contact_force: jax.Array  # (n_contacts,) normal force
+    touch: jax.Array  # (4 * (k + 3),) sensing.sense's touch features
+    region_mask: jax.Array  # (8,) 0/1
+    extended_region_mask: jax.Array  # (4,) 0/1
 
 
-def unpack(physics: NativePhysics, bits, packed, geom) -> NativeData:
+def unpack(physics: NativePhysics, bits, packed) -> NativeData:
     """NativeData from `NativePhysics` outputs (NumPy or JAX arrays, any leading batch shape)."""
     lead = packed.shape[:-1]
     fields, offset = {}, 0
@@ -47,7 +46,7 @@ def unpack(physics: NativePhysics, bits, packed, geom) -> NativeData:
         size = int(np.prod(shape))
         fields[name] = packed[..., offset:offset + size].reshape(lead + shape)
         offset += size
-    return NativeData(state=bits, contact_geom=geom, **fields)
+    return NativeData(state=bits, **fields)
 
 
 class NativeSelfTouchEnv(SelfTouchEnv):
@@ -56,7 +55,7 @@ class NativeSelfTouchEnv(SelfTouchEnv):
     def _setup_physics(self):
         m = self.model
         self.physics = NativePhysics(m, self.config.physics, n_contacts=self.config.physics.max_contact_points,
-                                     action_smoothing=self.config.action_smoothing)
+                                     touch_k=self.config.k, action_smoothing=self.config.action_smoothing)
         rows = self.physics.state_rows(m.init_qpos, m.init_qvel, m.rest_ctrl, m.init_warmstart)
         init = [jnp.asarray(x[0]) for x in self.physics.forward(rows)]
         pool_rows = self.physics.state_rows(m.start_qpos, m.start_qvel, m.start_ctrl, m.start_warmstart)
@@ -75,5 +74,6 @@ class NativeSelfTouchEnv(SelfTouchEnv):
         # The state row defines the next step completely; the derived fields follow it for consistency.
         return jax.tree.map(lambda i, x: jnp.where(bad, i, x), self.init_data, d)
 
-    def contacts(self, d: NativeData):
-        return d.contact_geom, d.contact_pos, d.contact_dist, d.contact_force
+    def sense(self, d: NativeData):
+        # Sensed on the host with the physics step (native_physics.py): one call per vectorised step.
+        return d.touch, d.region_mask > 0, d.extended_region_mask > 0

@@ -14,9 +14,16 @@ Contacts come from MuJoCo contact sensors, one per self-contact pair of the mode
 a geom with a region), `num` slots each, sorted by penetration (`reduce="mindist"`): the batch cannot
 bind `d.contact` or `efc_force` (arena arrays), but it binds `sensordata`. Each slot gives found, the
 contact-frame force (its first component is the normal force, as `mj_contactForce` gives it), the
-penetration and the world position. The deepest `n_contacts` active slots of a world are returned,
-the MJX env's selection (`max_contact_points` deepest per condim group), with their geom pairs.
-The sensors are added to a copy of the model; they read the physics and never change it.
+penetration and the world position. The deepest `n_contacts` active slots of a world are its contacts,
+the MJX env's selection (`max_contact_points` deepest per condim group). The sensors are added to a
+copy of the model; they read the physics and never change it.
+
+Sensing runs here too, on the host, in float64 (`sensing.sense`, the code the MJX env runs in JAX and
+the twin in NumPy): a world has 0.4 active self-contacts on average, so the call compacts the batch to
+the worlds that touch and to as many contact entries as the busiest of them has, and senses only those
+(the MJX env's fixed-shape JAX sensing runs every entry of every world). A world without contact gets
+zero touch features and no regions, as `sense` gives it. What returns to JAX is only what the env's
+step reads, packed in one float32 row per world (`fields()`).
 """
 
 from __future__ import annotations
@@ -28,10 +35,11 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from mjx_protamer.envs import body
+from mjx_protamer.envs import body, sensing
 from mjx_protamer.envs.model import SelfTouchModel
 
 WORLDS_PER_THREAD = 32
+FEW_CONTACTS = 2  # worlds sensed together with a width of at most this many contacts (see _sense)
 SLOTS_PER_PAIR = 2  # capsule-capsule pairs can touch at two points
 # Per slot: found (1), force in the contact frame (3), dist (1), pos (3).
 _SLOT_WIDTH = 8
@@ -65,7 +73,7 @@ def sensor_model(xml: str, geom_names: list[str], pairs: np.ndarray) -> mujoco.M
 class NativePhysics:
     """Steps batches of worlds given as state rows; one `mujoco.batch.Batch` per batch size, reused."""
 
-    def __init__(self, model: SelfTouchModel, physics_config, n_contacts: int, nthread: int = 0,
+    def __init__(self, model: SelfTouchModel, physics_config, n_contacts: int, touch_k: int, nthread: int = 0,
                  action_smoothing: float = 0.0):
         m0 = model.mj_model
         names = [mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_GEOM, i) for i in range(m0.ngeom)]
@@ -76,6 +84,9 @@ class NativePhysics:
         self.n_slots = len(self.pairs) * SLOTS_PER_PAIR
         self.n_contacts = min(n_contacts, self.n_slots) if n_contacts > 0 else self.n_slots
         self.slot_geom = np.repeat(self.pairs, SLOTS_PER_PAIR, axis=0).astype(np.int32)  # (S, 2)
+        self._tables = model.sensing.as_xp(np)
+        self.touch_k = touch_k
+        self.touch_size = 4 * (touch_k + 3)
         self.nthread = nthread or (os.cpu_count() or 1)
         self._action_lo = model.ctrl_lo
         self._action_hi = model.ctrl_hi
@@ -134,9 +145,9 @@ class NativePhysics:
         """One physics step of each world: `bits` (..., 2 nstate) uint32 rows, `action` (..., nu) in [-1, 1].
 
         The action becomes position targets here, in float64, exactly as the twin computes them.
-        Returns (state bits, packed float32 fields (see `FIELDS`), contact geom pairs, bad) for the
-        stepped worlds; `bad` marks worlds whose state diverged (MuJoCo's bad-state warnings rose,
-        non-finite state, or a simulation error).
+        Returns (state bits, packed float32 fields (see `fields`), bad) for the stepped worlds; `bad`
+        marks worlds whose state diverged (MuJoCo's bad-state warnings rose, non-finite state, or a
+        simulation error).
         """
         lead = bits.shape[:-1]
         rows = self.bits_to_rows(bits.reshape(-1, bits.shape[-1]))
@@ -166,29 +177,63 @@ class NativePhysics:
             b.forward()
             return self._outputs(b)
 
+    def forward_contacts(self, rows: np.ndarray):
+        """`mj_forward` of each row; its self-contacts as sensing reads them (see `_contacts`)."""
+        rows = np.atleast_2d(rows)
+        with self._lock:
+            b = self._batch(rows.shape[0])
+            b.state[:] = rows
+            b.forward()
+            return self._contacts(b, np.arange(rows.shape[0]), self.n_contacts)
+
     def fields(self) -> tuple[tuple[str, tuple[int, ...]], ...]:
-        """Name and per-world shape of each float32 field packed by `step`, in order."""
-        m, c = self.mj_model, self.n_contacts
-        return (("time", ()), ("qpos", (m.nq,)), ("qvel", (m.nv,)), ("actuator_force", (m.nu,)), ("geom_xpos", (m.ngeom, 3)),
-                ("geom_xmat", (m.ngeom, 3, 3)), ("contact_pos", (c, 3)), ("contact_dist", (c,)),
-                ("contact_force", (c,)))
+        """Name and per-world shape of each float32 field packed by `step`, in order (masks as 0/1)."""
+        m = self.mj_model
+        return (("time", ()), ("qpos", (m.nq,)), ("qvel", (m.nv,)), ("actuator_force", (m.nu,)),
+                ("touch", (self.touch_size,)), ("region_mask", (sensing.N_REGIONS,)),
+                ("extended_region_mask", (sensing.N_EXTENDED,)))
+
+    def _contacts(self, b: mujoco.batch.Batch, worlds: np.ndarray, width: int):
+        """Geom pairs (W, width, 2), positions (W, width, 3), penetrations and normal forces (W, width) of
+        the `width` deepest sensor slots of each of `worlds`, deepest first.
+
+        An empty slot is all zeros: penetration 0, which sensing counts as no contact (dist < 0 is a
+        contact), and which sorts after every real contact.
+        """
+        slots = b.sensordata.reshape(b.nsim, self.n_slots, _SLOT_WIDTH)[worlds]
+        order = np.argsort(slots[:, :, 4], axis=1, kind="stable")[:, :width]
+        pick = np.take_along_axis(slots, order[:, :, None], axis=1)
+        return self.slot_geom[order], pick[:, :, 5:8], pick[:, :, 4], pick[:, :, 1]
+
+    def _sense(self, b: mujoco.batch.Batch):
+        """Touch features (n, touch_size) and region masks (n, 8 + 4) of every world, sensing only the
+        worlds in contact, each group cut to the largest number of active contacts in it (entries past
+        a world's active ones are inactive and change nothing in `sense`): worlds with at most
+        `FEW_CONTACTS`, then the rest, since `sense`'s pairwise step grows with the square of the width."""
+        n, ng = b.nsim, self.mj_model.ngeom
+        touch = np.zeros((n, self.touch_size))
+        regions = np.zeros((n, sensing.N_REGIONS + sensing.N_EXTENDED))
+        count = np.count_nonzero(b.sensordata.reshape(n, self.n_slots, _SLOT_WIDTH)[:, :, 4] < 0, axis=1)
+        for worlds in (np.flatnonzero((count > 0) & (count <= FEW_CONTACTS)), np.flatnonzero(count > FEW_CONTACTS)):
+            if worlds.size == 0:
+                continue
+            geom, pos, depth, force = self._contacts(b, worlds, min(int(count[worlds].max()), self.n_contacts))
+            t, main, extended = sensing.sense(np, self._tables, self.touch_k, geom, pos, depth, force,
+                                              b.geom_xpos.reshape(n, ng, 3)[worlds],
+                                              b.geom_xmat.reshape(n, ng, 3, 3)[worlds])
+            touch[worlds] = t
+            regions[worlds] = np.concatenate([main, extended], axis=1)
+        return touch, regions
 
     def _outputs(self, b: mujoco.batch.Batch):
-        """(state bits, the float fields packed in one float32 row per world, contact geom pairs).
+        """(state bits, the float fields packed in one float32 row per world).
 
-        Copies: the batch overwrites its outputs on the next call. One packed array instead of eight
+        Copies: the batch overwrites its outputs on the next call. One packed array instead of seven
         keeps the per-call overhead of the callback small (it matters for a single env).
         """
-        n = b.nsim
         state = b.state.copy()
-        slots = b.sensordata.reshape(n, self.n_slots, _SLOT_WIDTH)
-        # An empty slot is all zeros: penetration 0, which sensing counts as no contact (dist < 0 is
-        # a contact), and which sorts after every real contact.
-        dist = slots[:, :, 4]
-        order = np.argsort(dist, axis=1, kind="stable")[:, : self.n_contacts]
-        pick = np.take_along_axis(slots, order[:, :, None], axis=1)
+        touch, regions = self._sense(b)
         packed = np.concatenate([
             state[:, self._time_slice], state[:, self._qpos_slice], state[:, self._qvel_slice], b.actuator_force,
-            b.geom_xpos.reshape(n, -1), b.geom_xmat.reshape(n, -1),
-            pick[:, :, 5:8].reshape(n, -1), pick[:, :, 4], pick[:, :, 1]], axis=1).astype(np.float32)
-        return state.view(np.uint32), packed, self.slot_geom[order]
+            touch, regions], axis=1).astype(np.float32)
+        return state.view(np.uint32), packed

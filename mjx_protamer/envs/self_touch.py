@@ -38,7 +38,7 @@ class SelfTouchEnv:
         self.init_data, pool = self._setup_physics()
         self._start_states = jax.jit(jax.vmap(self._start_state))(pool)
 
-    # --- the physics backend (MJX here; native_env.py overrides these four) ---------------------
+    # --- the physics backend (MJX here; native_env.py overrides these four and `sense`) --------
     def _setup_physics(self):
         """The device model; returns the forwarded settled state and the forwarded pool of starts."""
         m = self.model.mj_model

@@ -1,8 +1,10 @@
 """Touch features and body regions from a list of contacts, written once for NumPy and JAX.
 
-`xp` is `numpy` (the native-MuJoCo twin, float64) or `jax.numpy` (the MJX env, float32); the one
-operation the two spell differently (top-k) goes through `nearest_k`. Inputs are contact arrays as
-both simulators give them: geom pairs, world positions, penetration and normal force.
+`xp` is `numpy` (the twin and the native backend's host side, float64) or `jax.numpy` (the MJX env,
+float32); the two operations the two spell differently go through `nearest_k` (top-k) and
+`on_valid_entries` (NumPy computes the per-contact geometry only for the contacts that count; JAX,
+which needs fixed shapes, for every slot). Inputs are contact arrays as both simulators give them: geom
+pairs, world positions, penetration and normal force, for one world or a batch of worlds.
 
 Per hand geom (left palm, left fingers, right palm, right fingers) the feature is
 [contact position relative to the geom (3), forces of the k sensors nearest the contact (k)],
@@ -32,6 +34,22 @@ def nearest_k(xp, d, k: int):
     import jax
 
     return jax.lax.top_k(-d, k)[1]
+
+
+def on_valid_entries(xp, valid, fn, *entries):
+    """`fn` over contact entries (arrays with `valid`'s leading shape); NumPy computes only the valid
+    entries and fills the others with zeros (a batch of worlds has few active contacts), JAX all of them.
+    Callers give invalid entries zero weight, so the two agree bit for bit on what counts."""
+    if xp is not np:
+        return fn(*entries)
+    where = np.nonzero(valid)
+    outs = fn(*(x[where] for x in entries))
+    full = []
+    for out in outs:
+        z = np.zeros(valid.shape + out.shape[1:], out.dtype)
+        z[where] = out
+        full.append(z)
+    return full
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,23 +88,32 @@ def build_sensing_tables(geom_names: list[str], touch: TouchTables) -> SensingTa
 
 
 def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geom_xpos, geom_xmat):
-    """Touch features (4 * (k + 3),), main region mask (8,) and extended region mask (4,).
+    """Touch features (..., 4 * (k + 3)), main region mask (..., 8) and extended region mask (..., 4).
 
-    geom (n, 2) int, pos (n, 3), dist (n,), normal_force (n,): the contacts (inactive ones allowed:
-    dist >= 0 ignores them). geom_xpos (ngeom, 3), geom_xmat (ngeom, 3, 3): geom frames.
+    geom (..., n, 2) int, pos (..., n, 3), dist (..., n), normal_force (..., n): the contacts (inactive
+    ones allowed: dist >= 0 ignores them). geom_xpos (..., ngeom, 3), geom_xmat (..., ngeom, 3, 3): geom
+    frames. Any leading shape: one world (the MJX env, vmapped; the twin) or a batch of worlds at once
+    (the native backend's host side, `NativePhysics._sense`).
     """
     # Each contact is seen from its hand geom. A hand-to-hand contact touches both hands: the second
     # hand's view is added for the HAND_HAND_ENTRIES deepest such contacts (more at once is rare).
     geom_hand = tables["geom_hand"]
-    g1, g2 = geom[:, 0], geom[:, 1]
+    g1, g2 = geom[..., 0], geom[..., 1]
     first_is_hand = geom_hand[g1] >= 0
     both_hands = first_is_hand & (geom_hand[g2] >= 0) & (dist < 0)
-    extra = nearest_k(xp, xp.where(both_hands, dist, 1e9), min(HAND_HAND_ENTRIES, geom.shape[0]))
-    own = xp.concatenate([xp.where(first_is_hand, g1, g2), g2[extra]])
-    other = xp.concatenate([xp.where(first_is_hand, g2, g1), g1[extra]])
-    p_world = xp.concatenate([pos, pos[extra]])
-    force = xp.concatenate([normal_force, normal_force[extra]])
-    active = xp.concatenate([dist < 0, both_hands[extra]])
+    extra = nearest_k(xp, xp.where(both_hands, dist, 1e9), min(HAND_HAND_ENTRIES, geom.shape[-2]))
+
+    def also(x, extra_x):
+        return xp.concatenate([x, extra_x], axis=-1)
+
+    def take(x, idx):  # entries of x (..., n) at idx (..., e)
+        return xp.take_along_axis(x, idx, axis=-1)
+
+    own = also(xp.where(first_is_hand, g1, g2), take(g2, extra))
+    other = also(xp.where(first_is_hand, g2, g1), take(g1, extra))
+    p_world = xp.concatenate([pos, xp.take_along_axis(pos, extra[..., None], axis=-2)], axis=-2)
+    force = also(normal_force, take(normal_force, extra))
+    active = also(dist < 0, take(both_hands, extra))
 
     hand = geom_hand[own]
     region = tables["geom_region"][other]
@@ -94,42 +121,55 @@ def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geo
     hand_i = xp.where(is_hand, hand, 0)
     valid = active & is_hand & (region >= 0) & (region != tables["hand_excluded_region"][hand_i])
 
-    # Contact position in the hand geom's frame (row vectors: R^T (p - x) == (p - x) @ R).
-    rel = p_world - geom_xpos[own]
-    p_local = xp.einsum("ni,nij->nj", rel, geom_xmat[own])
-    q = project_to_surface(xp, p_local, tables["half_length"][hand_i], tables["radius"][hand_i])
-
-    # Candidate sensors from the voxel grid of the hand geom: one row of positions each (padding is a
-    # far-away dummy sensor that never gets weight).
-    cell = tables["grid_cell"][hand_i][:, None]
-    dims = tables["grid_dims"][hand_i]
-    ijk = xp.floor((q - tables["grid_origin"][hand_i]) / cell).astype(dims.dtype)
-    ijk = xp.clip(ijk, 0, dims - 1)
-    voxel = tables["grid_offset"][hand_i] + (ijk[:, 0] * dims[:, 1] + ijk[:, 1]) * dims[:, 2] + ijk[:, 2]
-    # Positions are component-major, (E, 3, C): XLA's CPU loops vectorise over C, not over xyz.
-    cand_pos = tables["candidate_pos"][voxel]
-    d = xp.sqrt(sum((cand_pos[:, a, :] - q[:, a, None]) ** 2 for a in range(3)))  # (E, C)
-    nearest = nearest_k(xp, d, k)  # (E, k), nearest first
-    near_pos = [xp.take_along_axis(cand_pos[:, a, :], nearest, axis=1) for a in range(3)]  # 3 x (E, k)
+    frame_pos = xp.take_along_axis(geom_xpos, own[..., None], axis=-2)
+    frame_mat = xp.take_along_axis(geom_xmat, own[..., None, None], axis=-3)
+    p_local, q, near_x, near_y, near_z, w_sum = on_valid_entries(
+        xp, valid, lambda *e: _entry_geometry(xp, tables, k, *e), hand_i, p_world, frame_pos, frame_mat)
+    near_pos = (near_x, near_y, near_z)
 
     # Each contact's normal force is spread over the sensors within the radius with a linear
     # fall-off, normalised so the sensors' forces sum to the contact's force. A sensor's reading is
     # the sum over all contacts on its geom. Contacts are few, so the sum is computed densely
     # between contacts (E x k x E) rather than scattered into the ~1,200-sensor field.
-    radius = tables["spread_radius"][hand_i]  # (E,)
-    w_sum = xp.sum(xp.clip(1.0 - d / radius[:, None], 0.0, None), axis=1)  # (E,)
-    scale = xp.where(valid & (w_sum > 0), force / xp.where(w_sum > 0, w_sum, 1.0), 0.0)  # (E,)
-    gap = xp.sqrt(sum((near_pos[a][:, :, None] - q[None, None, :, a]) ** 2 for a in range(3)))  # (E, k, E')
-    w_pair = xp.clip(1.0 - gap / radius[None, None, :], 0.0, None)
-    same_geom = (hand_i[:, None] == hand_i[None, :]).astype(w_pair.dtype)  # (E, E')
-    readings = xp.einsum("ejf,ef,f->ej", w_pair, same_geom, scale)  # (E, k)
+    radius = tables["spread_radius"][hand_i]  # (..., E)
+    scale = xp.where(valid & (w_sum > 0), force / xp.where(w_sum > 0, w_sum, 1.0), 0.0)  # (..., E)
+    gap = xp.sqrt(sum((near_pos[a][..., :, :, None] - q[..., None, None, :, a]) ** 2
+                      for a in range(3)))  # (..., E, k, E')
+    w_pair = xp.maximum(1.0 - gap / radius[..., None, None, :], 0.0)  # (NumPy's clip is slower)
+    same_geom = (hand_i[..., :, None] == hand_i[..., None, :]).astype(w_pair.dtype)  # (..., E, E')
+    readings = xp.einsum("...ejf,...ef,...f->...ej", w_pair, same_geom, scale)  # (..., E, k)
 
-    features = xp.concatenate([p_local, readings], axis=1) * valid[:, None]
-    onehot = (hand_i[:, None] == xp.arange(4)[None, :]) & valid[:, None]  # (2n, 4)
-    count = xp.sum(onehot, axis=0)
-    summed = xp.einsum("nh,nf->hf", onehot.astype(features.dtype), features)
-    touch = (summed / xp.maximum(count, 1)[:, None]).reshape(-1)
+    features = xp.concatenate([p_local, readings], axis=-1) * valid[..., None]
+    onehot = (hand_i[..., None] == xp.arange(4)) & valid[..., None]  # (..., E, 4)
+    count = xp.sum(onehot, axis=-2)
+    summed = xp.einsum("...nh,...nf->...hf", onehot.astype(features.dtype), features)
+    touch = (summed / xp.maximum(count, 1)[..., None]).reshape(summed.shape[:-2] + (-1,))
 
-    region_hits = (region[:, None] == xp.arange(N_REGIONS + N_EXTENDED)[None, :]) & valid[:, None]
-    touched = xp.any(region_hits, axis=0)
-    return touch, touched[:N_REGIONS], touched[N_REGIONS:]
+    region_hits = (region[..., None] == xp.arange(N_REGIONS + N_EXTENDED)) & valid[..., None]
+    touched = xp.any(region_hits, axis=-2)
+    return touch, touched[..., :N_REGIONS], touched[..., N_REGIONS:]
+
+
+def _entry_geometry(xp, tables, k: int, hand_i, p_world, frame_pos, frame_mat):
+    """Per contact entry (any leading shape): its position in the hand geom's frame, its projection on
+    the surface, the positions of its k nearest sensors (x, y, z, each (..., k)) and the sum of its
+    fall-off weights over the sensors."""
+    # Contact position in the hand geom's frame (row vectors: R^T (p - x) == (p - x) @ R).
+    p_local = xp.einsum("...i,...ij->...j", p_world - frame_pos, frame_mat)
+    q = project_to_surface(xp, p_local, tables["half_length"][hand_i], tables["radius"][hand_i])
+
+    # Candidate sensors from the voxel grid of the hand geom: one row of positions each (padding is a
+    # far-away dummy sensor that never gets weight).
+    cell = tables["grid_cell"][hand_i][..., None]
+    dims = tables["grid_dims"][hand_i]
+    ijk = xp.floor((q - tables["grid_origin"][hand_i]) / cell).astype(dims.dtype)
+    ijk = xp.minimum(xp.maximum(ijk, 0), dims - 1)
+    voxel = (tables["grid_offset"][hand_i] + (ijk[..., 0] * dims[..., 1] + ijk[..., 1]) * dims[..., 2]
+             + ijk[..., 2])
+    # Positions are component-major, (..., 3, C): XLA's CPU loops vectorise over C, not over xyz.
+    cand_pos = tables["candidate_pos"][voxel]
+    d = xp.sqrt(sum((cand_pos[..., a, :] - q[..., a, None]) ** 2 for a in range(3)))  # (..., C)
+    nearest = nearest_k(xp, d, k)  # (..., k), nearest first
+    near = [xp.take_along_axis(cand_pos[..., a, :], nearest, axis=-1) for a in range(3)]
+    w_sum = xp.sum(xp.maximum(1.0 - d / tables["spread_radius"][hand_i][..., None], 0.0), axis=-1)
+    return (p_local, q, *near, w_sum)

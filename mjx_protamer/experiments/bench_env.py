@@ -7,9 +7,11 @@ One run measures, on this machine:
   median of `--repeats` timed chunks;
 - MJX physics-only steps/s: vmapped `mjx.step` under the same scan, same model, at batch 256;
 - native full env steps/s (`NativeSelfTouchEnv`: native MuJoCo through one `jax.pure_callback` per
-  vectorised step, sensing and reward in JAX), the same wrapped chunk at each batch size, and its compile;
+  vectorised step, touch sensing on the host in the same call, reward and observation in JAX), the same
+  wrapped chunk at each batch size, and its compile;
 - native physics-only steps/s through `mujoco.batch` (the native env's engine: state rows in, step, the
-  bound outputs copied out) at batch 256, beside `mujoco.rollout`;
+  outputs the env reads copied out, touch sensing left out) at batch 256, beside `mujoco.rollout`, and
+  the same with the host's touch sensing (`native_batch_physics_and_sensing_steps_per_s`);
 - the alternative to the callback: a Python loop that steps the native physics on the host and calls a
   jitted post-physics step (sensing, reward, wrappers) per vectorised step (`native_host_loop_steps_per_s`);
 - native MuJoCo physics-only steps/s: `mujoco.rollout.rollout` on all cores (one MjData per thread);
@@ -25,6 +27,7 @@ Timings are wall-clock on a shared machine: other processes' load shows up in th
 from __future__ import annotations
 
 import argparse
+import copy
 from pathlib import Path
 import dataclasses
 import os
@@ -155,9 +158,17 @@ def _bench_mjx_physics(env, batch: int, steps: int, repeats: int, seed: int = 0)
 
 
 # --- native C and the NumPy twin -----------------------------------------------------------------------
-def _bench_native_batch_physics(native_env, batch: int, steps: int, repeats: int, seed: int = 0) -> dict:
-    """`NativePhysics.step` alone (mujoco.batch, the outputs the env reads copied out), host loop."""
+def _bench_native_batch_physics(native_env, batch: int, steps: int, repeats: int, seed: int = 0,
+                                sense: bool = True) -> dict:
+    """`NativePhysics.step` alone (mujoco.batch, the outputs the env reads copied out), host loop; with
+    `sense=False` without the host's touch sensing (zeros in its place): the physics alone."""
+    from mjx_protamer.envs.sensing import N_EXTENDED, N_REGIONS
+
     physics = native_env.physics
+    if not sense:
+        physics = copy.copy(physics)
+        physics._batches = {}
+        physics._sense = lambda b: (np.zeros((b.nsim, physics.touch_size)), np.zeros((b.nsim, N_REGIONS + N_EXTENDED)))
     bits = np.tile(np.asarray(native_env.init_data.state), (batch, 1))
     actions = np.random.default_rng(seed).uniform(-1, 1, (steps, batch, native_env.action_size)).astype(np.float32)
     holder = [bits]
@@ -199,8 +210,8 @@ def _bench_native_host_loop(native_env, batch: int, steps: int, repeats: int, se
     def run():
         s = holder[0]
         for a in actions:
-            *out, _ = physics.step(np.asarray(s.data.state), a)
-            s = post(s, unpack(physics, *out), a)
+            bits, packed, _ = physics.step(np.asarray(s.data.state), a)
+            s = post(s, unpack(physics, bits, packed), a)
         jax.block_until_ready(s.reward)
         holder[0] = s
 
@@ -355,8 +366,10 @@ def run_env_benchmark(args) -> dict:
 
     native_env = NativeSelfTouchEnv(env.config)
     report.update(_env_sweep("native", native_env, sizes, steps, repeats))
-    batch_phys = _bench_native_batch_physics(native_env, physics_batch, steps, repeats)
+    batch_phys = _bench_native_batch_physics(native_env, physics_batch, steps, repeats, sense=False)
     report["native_batch_physics_steps_per_s"] = batch_phys["steps_per_s"]
+    report["native_batch_physics_and_sensing_steps_per_s"] = _bench_native_batch_physics(
+        native_env, physics_batch, steps, repeats)["steps_per_s"]
     report["native_batch_physics_threads"] = batch_phys["nthread"]
     report["native_host_loop_steps_per_s"] = _bench_native_host_loop(native_env, physics_batch, steps,
                                                                      repeats)["steps_per_s"]

@@ -57,11 +57,21 @@ def make_env(config):
     return make_self_touch_env(config.env, _num_envs(config))
 
 
-def make_live_env(config):
-    """The env for live fine-tuning (one world, a fresh env state): the backend that steps ONE world
-    fastest here, whatever backend the checkpoint trained on. `config` is the pretrain run's config."""
-    env_config = dataclasses.replace(config.env, backend="auto")
-    return make_self_touch_env(env_config, num_envs=1)
+def live_config(config, backend: str | None = None):
+    """The run config for live fine-tuning (one world, a fresh env state): `env.backend` set to `backend`
+    (a session's recorded choice, so a resume or replay builds the same env) or else to the backend that
+    steps ONE world fastest here, whatever the checkpoint trained on. `config` is the pretrain run's.
+    The session saves this config, so it records the backend actually used."""
+    if getattr(config, "env_name", "self_touch") != "self_touch":
+        return config
+    chosen = backend or resolve_backend("auto", num_envs=1)
+    return dataclasses.replace(config, env=dataclasses.replace(config.env, backend=chosen))
+
+
+def make_live_env(config, backend: str | None = None):
+    """(the env for live fine-tuning, the config that records its backend): see `live_config`."""
+    config = live_config(config, backend)
+    return make_env(config), config
 
 
 def make_self_touch_env(env_config, num_envs: int | None = None):

@@ -2,6 +2,8 @@
 
 What each test pins down:
 - the contact sensors give exactly MuJoCo's own contacts (`d.contact` + `mj_contactForce`), deepest first;
+- the host senses a batch at once (only the worlds in contact) exactly as `sensing.sense` senses each
+  world, including worlds with more contacts than the capacity (the deepest count);
 - the jitted native env (callback inside `lax.scan`, resets from the pool) reproduces the NumPy twin's
   trajectory: physics bit for bit (both are `mj_step` in float64), so qpos agrees to float32 rounding and
   the observation, regions and reward (sensing in float32 here, float64 there) to float32 precision;
@@ -56,10 +58,7 @@ def test_contact_sensors_give_mujocos_contacts(native_env):
     d = mujoco.MjData(m)
     hand, region = native_env.model.sensing.geom_hand, native_env.model.sensing.geom_region
     states = list(_random_states(m, native_env.model, 300, seed=4))
-    from mjx_protamer.envs.native_env import unpack
-
-    out = unpack(phys, *phys.forward(phys.state_rows(*(np.array(x) for x in zip(*states)))))
-    geom, pos, dist, force = out.contact_geom, out.contact_pos, out.contact_dist, out.contact_force
+    geom, pos, dist, force = phys.forward_contacts(phys.state_rows(*(np.array(x) for x in zip(*states))))
     with_contact = 0
     for i, (qpos, qvel, ctrl, ws) in enumerate(states):
         d.qpos[:], d.qvel[:], d.ctrl[:], d.qacc_warmstart[:] = qpos, qvel, ctrl, ws
@@ -78,6 +77,49 @@ def test_contact_sensors_give_mujocos_contacts(native_env):
     assert with_contact >= 30, with_contact
 
 
+@pytest.mark.parametrize("n_contacts", [8, 2])
+def test_host_sensing_of_a_batch_equals_sense_per_world(native_env, n_contacts):
+    """The callback senses a batch at once, only the worlds in contact, grouped by their number of
+    contacts: on 300 random poses (worlds with 0 to 8 self-contacts) its touch features and region masks
+    equal `sensing.sense` run world by world on that world's `n_contacts` deepest contacts, bit for bit.
+    With capacity 2, worlds with more contacts exist and count only their 2 deepest (MJX's rule)."""
+    import mujoco
+
+    from mjx_protamer.envs import sensing
+    from mjx_protamer.envs.native_env import unpack
+    from mjx_protamer.envs.native_physics import FEW_CONTACTS, NativePhysics
+
+    phys = NativePhysics(native_env.model, native_env.config.physics, n_contacts=n_contacts,
+                         touch_k=native_env.config.k)
+    m = phys.mj_model
+    rows = phys.state_rows(*(np.array(x) for x in zip(*_random_states(m, native_env.model, 300, seed=4))))
+    out = unpack(phys, *phys.forward(rows))
+    geom, pos, dist, force = phys.forward_contacts(rows)
+    counts = np.count_nonzero(dist < 0, axis=1)
+    assert ((counts > 0) & (counts <= FEW_CONTACTS)).any()
+    if n_contacts > FEW_CONTACTS:
+        assert (counts > FEW_CONTACTS).any(), "the group of worlds with many contacts was not exercised"
+    else:
+        d = mujoco.MjData(m)
+        over = 0
+        for row in rows:
+            mujoco.mj_setState(m, d, row, mujoco.mjtState.mjSTATE_INTEGRATION)
+            mujoco.mj_forward(m, d)
+            over += np.count_nonzero(d.sensordata.reshape(-1, 8)[:, 4] < 0) > n_contacts
+        assert over >= 5, f"only {over} worlds with more than {n_contacts} contacts"
+    tables = native_env.model.sensing.as_xp(np)
+    for i, row in enumerate(rows):
+        d = mujoco.MjData(m)
+        mujoco.mj_setState(m, d, row, mujoco.mjtState.mjSTATE_INTEGRATION)
+        mujoco.mj_forward(m, d)
+        touch, main, extended = sensing.sense(np, tables, native_env.config.k, geom[i], pos[i], dist[i], force[i],
+                                              d.geom_xpos, d.geom_xmat.reshape(-1, 3, 3))
+        np.testing.assert_array_equal(out.touch[i], touch.astype(np.float32), err_msg=f"world {i}")
+        np.testing.assert_array_equal(out.region_mask[i], main, err_msg=f"world {i}")
+        np.testing.assert_array_equal(out.extended_region_mask[i], extended, err_msg=f"world {i}")
+    assert (np.abs(out.touch).sum(axis=1) > 0).sum() >= 30
+
+
 @pytest.fixture(scope="module")
 def native_roll(native_env, trajectory_fn):
     """Jitted: (reset key, actions (T, 14)) -> per-step obs, qpos, reward, region masks, nan resets."""
@@ -87,9 +129,9 @@ def native_roll(native_env, trajectory_fn):
 @pytest.mark.parametrize("seed", [3, 5])  # held-target sequences that make contact through the 20 ms filter
 def test_trajectory_equals_the_twin(native_env, native_roll, seed):
     """150 held-random-action steps from the settled start (shipping solver settings), through the jitted
-    env: qpos equal to float32 rounding of the same float64 trajectory; proprioception to 1e-5, touch
-    readings to 1e-3 of the largest and reward to 1e-3 (float32 sensing); region masks identical on every
-    step."""
+    env: qpos equal to float32 rounding of the same float64 trajectory; touch features too (sensed in
+    float64 on the host, as the twin senses); proprioception to 1e-5 and reward to 1e-3 (float32 in JAX);
+    region masks identical on every step."""
     import jax
 
     from mjx_protamer.envs.twin import SelfTouchTwinEnv
@@ -104,9 +146,10 @@ def test_trajectory_equals_the_twin(native_env, native_roll, seed):
         o, r, _, _, info = twin.step(a)
         np.testing.assert_allclose(qpos_j[t], twin.data.qpos, rtol=1e-6, atol=1e-6, err_msg=f"step {t}")
         b = 4 * BLOCK
-        # Sensor readings weight each sensor by a linear fall-off over ~3 mm: float32 contact positions
-        # move them by up to ~5e-4 of the reading (measured 3e-4).
-        np.testing.assert_allclose(obs_j[t, :b], o[:b], atol=1e-3 * np.abs(o[:b]).max() + 1e-5, err_msg=f"step {t}")
+        # Touch is sensed on the host in float64 from the same contacts, as the twin does: equal to float32
+        # rounding of the result.
+        np.testing.assert_allclose(obs_j[t, :b], o[:b], rtol=1e-6, atol=1e-6 * np.abs(o[:b]).max() + 1e-7,
+                                   err_msg=f"step {t}")
         np.testing.assert_allclose(obs_j[t, b:], o[b:], atol=1e-5 * max(1.0, np.abs(o[b:]).max()), err_msg=f"step {t}")
         np.testing.assert_allclose(rew_j[t], r, atol=1e-3 * max(1.0, abs(r)), err_msg=f"step {t}")
         np.testing.assert_array_equal(reg_j[t], info["region_mask"], err_msg=f"step {t}")
@@ -128,7 +171,8 @@ def test_one_step_agrees_with_mjx_at_the_converged_solver(eq_mjx_env, eq_twin):
     from mjx_protamer.envs.native_physics import NativePhysics
 
     env = eq_mjx_env
-    phys = NativePhysics(env.model, env.config.physics, n_contacts=env.config.physics.max_contact_points)
+    phys = NativePhysics(env.model, env.config.physics, n_contacts=env.config.physics.max_contact_points,
+                         touch_k=env.config.k)
     rng = np.random.default_rng(5)
     states, actions, touching = [], [], 0
     for ep in range(3):
@@ -146,8 +190,8 @@ def test_one_step_agrees_with_mjx_at_the_converged_solver(eq_mjx_env, eq_twin):
     states = [np.array(x) for x in zip(*states)]
     actions = np.array(actions)
     rows = phys.state_rows(*states)
-    bits, packed, geom, bad = phys.step(phys.rows_to_bits(rows), actions)
-    stepped = unpack(phys, bits, packed, geom)
+    bits, packed, bad = phys.step(phys.rows_to_bits(rows), actions)
+    stepped = unpack(phys, bits, packed)
     qpos_n, qvel_n = stepped.qpos, stepped.qvel
 
     @jax.jit

@@ -506,3 +506,37 @@ def test_resume_and_replay_argument_errors(tmp_path, capsys):
     assert "--checkpoint is required" in capsys.readouterr().err
     assert run_main("--feedback", "web", "--view", "none", "--checkpoint", tmp_path) == 2
     assert "it needs --view web" in capsys.readouterr().err
+
+
+def test_self_touch_session_runs_on_the_live_backend_records_it_and_replays_bit_for_bit(tmp_path, capsys):
+    """A self-touch checkpoint trained on the native backend: the session steps its one world on the backend
+    `env_factory.live_config` picks (not necessarily the checkpoint's), saves that backend in its
+    config.yaml and manifest, and a replay rebuilds the same env and ends at the same parameters."""
+    from mjx_protamer.config import load_config
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.experiments.env_factory import resolve_backend
+    from mjx_protamer.human.session_record import read_session
+
+    pre = tmp_path / "pt"
+    subprocess.run(protamer("pretrain", "--out", pre, "--no-progress", "--backend", "native",
+                            "--set", "ddpg.actor_hidden=[16]", "--set", "ddpg.critic_hidden=[16,16]",
+                            "--set", "train.num_envs=2", "--set", "train.total_env_steps=200",
+                            "--set", "train.warmup_env_steps=100", "--set", "train.chunk_steps=50"),
+                   check=True, capture_output=True, env=ENV, cwd=ROOT, timeout=600)
+    assert load_config(PretrainConfig, pre / "config.yaml").env.backend == "native"
+    live = resolve_backend("auto", num_envs=1)
+    session, again = tmp_path / "session", tmp_path / "replay"
+    assert run_main("--feedback", "simulated:keyboard", "--checkpoint", pre, "--out", session,
+                    "--chunk-ms", "100", "--max-chunks", "3", *TEACHER) == 0
+    assert f"[finetune] physics backend: {live} (the fastest for one world here)" in capsys.readouterr().out
+    manifest, _ = read_session(session)
+    assert manifest["env_backend"] == live
+    assert load_config(PretrainConfig, session / "config.yaml").env.backend == live
+    assert run_main("--replay", session, "--out", again) == 0
+    assert f"[finetune] physics backend: {live} (recorded by the session)" in capsys.readouterr().out
+    from mjx_protamer.experiments.evaluate import load_run
+    _, env1, s1, _ = load_run(session)
+    _, env2, s2, _ = load_run(again)
+    assert env1.backend == env2.backend == live
+    assert _leaves_equal(s1.actor_params, s2.actor_params) and _leaves_equal(s1.critic_params, s2.critic_params)
+    assert _leaves_equal(s1.env_state, s2.env_state)
