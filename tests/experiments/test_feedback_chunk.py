@@ -17,21 +17,9 @@ import pytest
 
 from mjx_protamer.config import from_dict
 
-RAW = {
-    "pretrain": {
-        "env_name": "toy",
-        "ddpg": {"actor_hidden": [16], "critic_hidden": [16, 16], "replay_size": 2000, "batch_size": 16,
-                 "reward_beta": 1.0},
-        "train": {"num_envs": 4, "episode_length": 25, "total_env_steps": 800, "warmup_env_steps": 100,
-                  "chunk_steps": 20, "num_devices": 0},
-    },
-    "feedback": {
-        "dt": 0.05,
-        "reward_model": {"hidden": [16]},
-        "teacher": {"min_gap_steps": 2, "rule": [{"signal": "reach", "value": 1.0, "above": 0.5},
-                                                 {"signal": "action:1", "value": -1.0, "below": -0.5}]},
-    },
-}
+from toy_feedback import toy_feedback_config
+
+RAW = toy_feedback_config(num_devices=0)
 
 
 def build(raw=RAW):

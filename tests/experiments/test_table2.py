@@ -6,20 +6,10 @@ import yaml
 
 from mjx_protamer.cli import main
 
+from toy_feedback import toy_feedback_config
+
 CONFIG = {
-    "pretrain": {
-        "env_name": "toy",
-        "ddpg": {"actor_hidden": [16], "critic_hidden": [16, 16], "replay_size": 2000, "batch_size": 16,
-                 "reward_beta": 1.0},
-        "train": {"num_envs": 4, "episode_length": 25, "total_env_steps": 600, "warmup_env_steps": 100,
-                  "chunk_steps": 50, "eval_episodes": 3},
-    },
-    "feedback": {
-        "dt": 0.05,
-        "reward_model": {"hidden": [16]},
-        "teacher": {"min_gap_steps": 2, "rule": [{"signal": "reach", "value": 1.0, "above": 0.5},
-                                                 {"signal": "action:1", "value": -1.0, "below": -0.5}]},
-    },
+    **toy_feedback_config(total_env_steps=600, chunk_steps=50, eval_episodes=3),
     "conditions": [{"name": "DDPG", "channel": "none"}, {"name": "DTK", "channel": "keyboard", "credit": "step_window"},
                    {"name": "DTW", "channel": "speech"}, {"name": "DTP", "channel": "prosody"}],
     "moving_average": 2,
