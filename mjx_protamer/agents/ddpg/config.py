@@ -125,7 +125,9 @@ def batched_ddpg() -> DDPGConfig:
     OU theta 0.01 (correlation time 100 steps = 0.5 s) with sigma 0.042 (stationary std 0.3): the paper's
     theta 0.15 changes the target every 5 ms step, and stiff 200 Hz servos turn that into 10-20 rad/s of
     jitter (the movement band is then never met and the critic never sees a slow or frozen arm). With the
-    paper's sigma 0.6 and tau 0.001, batched self-touch training collapses after ~30k env steps."""
+    paper's sigma 0.6 and tau 0.001, batched self-touch training collapses after ~30k env steps. A quarter of the
+    envs act without noise (`quiet_fraction`): over 5 seeds at 256k env steps the test policy's freeze ratio
+    was 0.12 +- 0.11 (seed std 0.09) with them and 0.19 +- 0.23 (std 0.18) without (docs/experiments.md)."""
     return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042, quiet_fraction=0.25))
 
 
