@@ -7,8 +7,11 @@ renaming fields can never put the actor into the target actor silently.
 Beside the arrays, each step directory holds `manifest.json`: every leaf's path, shape and dtype and a
 SHA-256 over the leaves' names and bytes. It is written atomically after orbax has finished the step, so a
 step without it is an unfinished save. `restore` checks the manifest against the structure it restores into
-(a checkpoint of another config is refused and says which leaf differs), then the checksum of what it read
-(a damaged checkpoint is refused with "use the previous one"). `newest_intact` is what `--resume` uses.
+(a checkpoint of another config is refused and says which leaf differs), then every file's size and SHA-256
+before orbax opens any of them, then the checksum of what it read (a damaged checkpoint is refused with "use
+the previous one"). Checking the files first matters: when orbax meets one unreadable array it abandons its
+reads of the others, and tensorstore's threads print their failures to stderr after the error was reported.
+`newest_intact` is what `--resume` uses.
 
 Orbax writes each step into a temporary directory and renames it when complete, so a run killed while saving
 leaves the previous checkpoint intact. Saving is synchronous: the train step donates its input buffers, so
@@ -34,7 +37,7 @@ import orbax.checkpoint as ocp
 from mjx_protamer.errors import CheckpointDamaged, CheckpointError
 
 MANIFEST = "manifest.json"
-FORMAT = 2  # 1: leaves by flat index, no manifest (before checksums)
+FORMAT = 3  # 1: leaves by flat index, no manifest (before checksums); 2: no per-file checksums
 
 
 def manager(directory: str | Path, max_to_keep: int = 2) -> ocp.CheckpointManager:
@@ -109,12 +112,40 @@ def write_atomic(path: Path, data: str | bytes) -> None:
         os.close(fd)
 
 
+def _file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _file_digests(directory: Path) -> dict[str, dict]:
+    """{relative path: {size, sha256}} of every file orbax wrote into the step directory."""
+    return {p.relative_to(directory).as_posix(): {"size": p.stat().st_size, "sha256": _file_sha256(p)}
+            for p in sorted(directory.rglob("*")) if p.is_file() and p.name != MANIFEST}
+
+
+def _check_files(manifest: dict, directory: Path) -> None:
+    """Refuse a missing, truncated or altered file before orbax reads any (see the module docstring)."""
+    for rel, want in manifest.get("files", {}).items():
+        path = directory / rel
+        if not path.is_file():
+            raise CheckpointDamaged(f"its file {rel} is missing")
+        size = path.stat().st_size
+        if size != want["size"]:
+            raise CheckpointDamaged(f"its file {rel} has {size} bytes, {want['size']} when saved (truncated?)")
+        if _file_sha256(path) != want["sha256"]:
+            raise CheckpointDamaged(f"its file {rel} does not match its SHA-256 checksum")
+
+
 def save(mngr: ocp.CheckpointManager, step: int, state) -> None:
     named = named_leaves(state)
     mngr.save(step, args=ocp.args.StandardSave(_nested(named)))
     mngr.wait_until_finished()
     host = {name: np.asarray(jax.device_get(x)) for name, x in named.items()}
-    manifest = {"format": FORMAT, "step": int(step), "leaves": _describe(host), "sha256": _digest(host)}
+    manifest = {"format": FORMAT, "step": int(step), "leaves": _describe(host), "sha256": _digest(host),
+                "files": _file_digests(step_dir(mngr, step))}
     write_atomic(step_dir(mngr, step) / MANIFEST, json.dumps(manifest, indent=1))
 
 
@@ -125,8 +156,11 @@ def _read_manifest(directory: Path) -> dict:
     try:
         manifest = json.loads(path.read_text(encoding="utf-8"))
         leaves, digest = manifest["leaves"], manifest["sha256"]
-        if not isinstance(leaves, dict) or not isinstance(digest, str):
+        files = manifest.get("files", {})  # absent in format 2
+        if not isinstance(leaves, dict) or not isinstance(digest, str) or not isinstance(files, dict):
             raise TypeError
+        for want in files.values():
+            int(want["size"]), str(want["sha256"])
     except (ValueError, KeyError, TypeError, UnicodeDecodeError):
         raise CheckpointDamaged(f"its {MANIFEST} is unreadable") from None
     return manifest
@@ -178,6 +212,10 @@ def restore(mngr: ocp.CheckpointManager, step: int, like):
     except CheckpointDamaged as e:
         raise CheckpointDamaged(f"checkpoint {directory} is damaged: {e}; {_previous_hint(mngr, step)}") from None
     _check_structure(manifest, like_named, directory)
+    try:
+        _check_files(manifest, directory)
+    except CheckpointDamaged as e:
+        raise CheckpointDamaged(f"checkpoint {directory} is damaged: {e}; {_previous_hint(mngr, step)}") from None
     abstract = _nested({name: _abstract(x) for name, x in like_named.items()})
     failure = None
     try:

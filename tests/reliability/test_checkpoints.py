@@ -74,14 +74,23 @@ def test_eval_refuses_a_bad_checkpoint_in_one_line(run_copy, capsys, name, damag
     assert capsys.readouterr().out == ""
 
 
-def test_wrong_arrays_under_an_intact_layout_fail_the_checksum(run_copy, capsys):
-    """Step 2's arrays under step 3's manifest: orbax reads them without complaint; the checksum does not."""
+@pytest.mark.parametrize("file_checksums", [True, False], ids=["files", "arrays only (format 2)"])
+def test_wrong_arrays_under_an_intact_layout_fail_the_checksum(run_copy, capsys, file_checksums):
+    """Step 2's arrays under step 3's manifest: orbax reads them without complaint; the file checksums refuse
+    them before orbax opens them, and without those (a format-2 manifest) the arrays' checksum still does."""
+    import json
+
     step2, step3 = run_copy / "checkpoints" / "2", run_copy / "checkpoints" / "3"
     shutil.rmtree(step3 / "default")
     shutil.copytree(step2 / "default", step3 / "default")
+    if not file_checksums:
+        manifest = json.loads((step3 / "manifest.json").read_text())
+        del manifest["files"]
+        (step3 / "manifest.json").write_text(json.dumps(manifest))
     code, err = run_cli(capsys, "eval", "--checkpoint", run_copy)
     assert code == 2 and len(err) == 1
-    assert "do not match their SHA-256 checksum; use the previous one" in err[0], err
+    says = "its file default/" if file_checksums else "its arrays do not match their SHA-256 checksum"
+    assert says in err[0] and "; use the previous one" in err[0], err
 
 
 @pytest.mark.filterwarnings("error::pytest.PytestUnraisableExceptionWarning")  # orbax's orphaned reads
