@@ -12,7 +12,14 @@ actor (the same test seed for every condition).
 Outputs in `out`: table2.md and table2.json (the paper's layout, the paper's numbers beside ours),
 figure1_training_reward.png (moving average of the training episode return per condition),
 figure2_unique_regions.png (box plot of unique regions per test episode), training.csv (every chunk of
-every run) and eval_<condition>_seed<k>.json.
+every run) and eval_<condition>_seed<k>.json; for `--resume` and the pooled reward-model score, each
+condition's reward models (reward_models/<condition>/, orbax) and a sample of its test states
+(test_states_<condition>.npz).
+
+How well r_hat learned its teacher is measured twice. `r_hat_corr_test` correlates r_hat with the hidden score
+on the condition's own test states; a policy that complies visits states whose score barely varies, so that
+figure is mostly noise once feedback has worked. `r_hat_corr_pooled` correlates it on the pooled test states of
+every condition of the same seed (the same states for every reward model), which span what the teacher judges.
 """
 
 from __future__ import annotations
@@ -129,8 +136,11 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
     init_feedback = jax.jit(jax.vmap(ft.init))
     chunk_fn = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)), donate_argnums=(0, 1))
     untrained = init_feedback(seeds).rm_params
+    reward_models: dict[str, object] = {}
+    test_states: dict[str, dict] = {}
     for cond in cfg.conditions:
         if done[cond.name].is_file():  # finished before an interruption (resume)
+            reward_models[cond.name], test_states[cond.name] = _load_condition_models(out, cond.name, untrained)
             kept = json.loads(done[cond.name].read_text())
             training += kept["training"]
             evals[cond.name] = {int(k): v for k, v in kept["evals"].items()}
@@ -164,7 +174,9 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
         ts, fs = run_chunks(step, (init(keys), init_feedback(seeds)), tc.num_chunks,
                             tc.chunk_steps * tc.num_envs * len(seeds), progress_fn=progress_fn).state
         train_s = time.perf_counter() - t0
-        results = evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params, untrained)
+        results, test_states[cond.name] = evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params, untrained)
+        reward_models[cond.name] = fs.rm_params
+        _save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name])
         for i, seed in enumerate(cfg.seeds):
             ev = results[i]
             last = [r for r in training if r["condition"] == cond.name and r["seed"] == seed][-1]
@@ -177,6 +189,11 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
         write_atomic(done[cond.name], json.dumps({
             "training": [r for r in training if r["condition"] == cond.name], "train_wall_s": train_s,
             "evals": {str(k): v for k, v in evals[cond.name].items()}}))
+    pooled = pooled_corr(ft, reward_models, untrained, test_states)
+    for name, per_seed in pooled.items():
+        for i, seed in enumerate(cfg.seeds):
+            evals[name][seed].update(per_seed[i])
+            write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(evals[name][seed], indent=2))
     total_s = time.perf_counter() - t_all
     _write_training_csv(training, out / "training.csv")
     summary = _summarize(cfg, evals, wall, total_s)
@@ -198,11 +215,56 @@ def _corr(x: np.ndarray, y: np.ndarray) -> float | None:
     return float(np.sum(x * y) / den) if den > 1e-12 else None
 
 
-def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untrained_params) -> list[dict]:
+STATE_STRIDE = 5  # every 5th test step (25 ms) is kept for the pooled score: neighbours are near copies
+
+
+def _save_condition_models(out: Path, name: str, rm_params, states: dict) -> None:
+    import io
+
+    from mjx_protamer.experiments import checkpoints
+
+    mngr = checkpoints.manager(out / "reward_models" / name, max_to_keep=1)
+    checkpoints.save(mngr, 0, jax.device_get(rm_params))
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **states)
+    checkpoints.write_atomic(out / f"test_states_{name}.npz", buf.getvalue())
+
+
+def _load_condition_models(out: Path, name: str, like) -> tuple[object, dict]:
+    from mjx_protamer.experiments import checkpoints
+
+    path = out / f"test_states_{name}.npz"
+    if not path.is_file():
+        raise ConfigError(f"--resume: {path} is missing (a run of an older version?); start again with another --out")
+    with np.load(path) as f:
+        states = {k: f[k] for k in f.files}
+    return checkpoints.restore(checkpoints.manager(out / "reward_models" / name), 0, like), states
+
+
+def pooled_corr(ft, reward_models: dict, untrained_params, test_states: dict) -> dict[str, list[dict]]:
+    """Per condition and seed, r_hat's correlation with the hidden score on the pooled test states of every
+    condition of that seed (`r_hat_corr_pooled`), beside the untrained reward model's
+    (`r_hat_corr_pooled_untrained`)."""
+    names = list(test_states)
+    obs = np.concatenate([test_states[n]["obs"] for n in names], axis=1)  # (seeds, states, obs)
+    action = np.concatenate([test_states[n]["action"] for n in names], axis=1)
+    score = np.concatenate([test_states[n]["score"] for n in names], axis=1)
+    apply = jax.jit(jax.vmap(ft.apply))
+    r_hat0 = np.asarray(apply(untrained_params, obs, action))
+    out = {}
+    for name in names:
+        r_hat = np.asarray(apply(reward_models[name], obs, action))
+        out[name] = [{"r_hat_corr_pooled": _corr(r_hat[i], score[i]),
+                      "r_hat_corr_pooled_untrained": _corr(r_hat0[i], score[i])} for i in range(len(obs))]
+    return out
+
+
+def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untrained_params) -> tuple[list[dict], dict]:
     """Test episodes of every seed's deterministic actor (vmapped over seeds): the four metrics, the
     teacher's mean hidden score on them (`teacher_score`), and how r_hat tracks that score on these
     held-out states, beside an untrained reward model of the same seed (`r_hat_corr_test`,
-    `r_hat_corr_untrained`)."""
+    `r_hat_corr_untrained`). Also every STATE_STRIDE-th test state with its score, per seed (seeds, n, ...),
+    for `pooled_corr`."""
     from mjx_protamer.agents.ddpg.evaluate import make_rollout
     from mjx_protamer.experiments.evaluate import eval_seed
     from mjx_protamer.human.teachers import rule_scores
@@ -222,9 +284,13 @@ def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untraine
         r_hat = ft.apply(rm_params, sig["obs"], sig["action"])
         r_hat0 = ft.apply(untrained_params, sig["obs"], sig["action"])
         keep = ("reward", "self_contact", "region_mask", "arm_speed")
-        return {k: sig[k] for k in keep}, score, r_hat, r_hat0
+        sample = {"obs": sig["obs"][:, ::STATE_STRIDE], "action": sig["action"][:, ::STATE_STRIDE],
+                  "score": score[:, ::STATE_STRIDE]}
+        sample = jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), sample)  # (episodes * steps, ...)
+        return {k: sig[k] for k in keep}, score, r_hat, r_hat0, sample
 
-    sig, score, r_hat, r_hat0 = jax.device_get(jax.vmap(run)(actor_params, rm_params, untrained_params, keys))
+    sig, score, r_hat, r_hat0, sample = jax.device_get(
+        jax.vmap(run)(actor_params, rm_params, untrained_params, keys))
     out = []
     for i in range(len(cfg.seeds)):
         ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i],
@@ -237,7 +303,7 @@ def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untraine
         ev["r_hat_corr_test"] = _corr(np.ravel(r_hat[i]), np.ravel(score[i]))
         ev["r_hat_corr_untrained"] = _corr(np.ravel(r_hat0[i]), np.ravel(score[i]))
         out.append(ev)
-    return out
+    return out, sample
 
 
 def seed_stats(values) -> dict:
@@ -274,7 +340,8 @@ def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> di
             entry[name] = seed_stats([per_seed[s][name] for s in cfg.seeds])
             entry[name]["seed_means"] = entry[name]["seed_values"]
             entry[name]["per_episode"] = [v for s in cfg.seeds for v in per_seed[s]["per_episode"][name]]
-        for name in ("r_hat_corr_test", "r_hat_corr_untrained", "episode_return"):
+        for name in ("r_hat_corr_test", "r_hat_corr_untrained", "r_hat_corr_pooled", "r_hat_corr_pooled_untrained",
+                     "episode_return"):
             entry[name] = seed_stats([per_seed[s][name] for s in cfg.seeds])
         entry["feedback"] = {k: float(np.mean([per_seed[s]["feedback"][k] for s in cfg.seeds]))
                              for k in per_seed[cfg.seeds[0]]["feedback"]}
@@ -334,6 +401,8 @@ def format_markdown(summary: dict) -> str:
     for key, label in (("teacher_score", "teacher_score (hidden rule, test episodes) ↑"),
                        ("r_hat_corr_test", "r_hat_corr_test (held-out test states)"),
                        ("r_hat_corr_untrained", "r_hat_corr_untrained (same states)"),
+                       ("r_hat_corr_pooled", "r_hat_corr_pooled (every condition's test states)"),
+                       ("r_hat_corr_pooled_untrained", "r_hat_corr_pooled_untrained (same states)"),
                        ("episode_return", "test return (intrinsic)")):
         lines.append(f"| {label} | " + " | ".join(_fmt(conds[c][key], 1 if key == "episode_return" else 3)
                                                   for c in names) + " |")
@@ -341,7 +410,7 @@ def format_markdown(summary: dict) -> str:
                        ("rm_updates_total", "r_hat updates")):
         lines.append(f"| {label} | " + " | ".join(f"{conds[c]['feedback'][key]:.0f}" for c in names) + " |")
     lines += ["", "Per-seed means (seeds in order):", ""]
-    for metric in M.METRIC_NAMES + ("teacher_score", "r_hat_corr_test"):
+    for metric in M.METRIC_NAMES + ("teacher_score", "r_hat_corr_test", "r_hat_corr_pooled"):
         vals = "; ".join(f"{c} " + ", ".join("n/a" if v is None else f"{v:.3g}" for v in conds[c][metric]["seed_values"])
                          for c in names)
         lines.append(f"- {metric}: {vals}")

@@ -33,6 +33,12 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     assert all(c[n]["feedback"]["feedback_total"] > 0 for n in ("DTK", "DTW", "DTP"))
     assert len(c["DTK"]["unique_regions"]["per_episode"]) == 6
     assert c["DTP"]["paper"]["contact_rate"] == 0.915
+    # the pooled reward-model score: every model on the same states; DDPG's model never trains
+    pooled = {n: c[n]["r_hat_corr_pooled"]["seed_values"] for n in c}
+    assert pooled["DDPG"] == c["DDPG"]["r_hat_corr_pooled_untrained"]["seed_values"]
+    assert all(v is None or -1 <= v <= 1 for n in c for v in pooled[n])  # None: the score is constant there
+    assert pooled["DTK"][0] is not None and pooled["DTK"] != pooled["DDPG"]
+    assert c["DTK"]["r_hat_corr_pooled_untrained"] == c["DTP"]["r_hat_corr_pooled_untrained"]
     # a run killed after two conditions: --resume keeps what finished and redoes the rest, to the same table
     kept = (out / "condition_DTK.json").read_bytes()
     for name in ("condition_DTW.json", "condition_DTP.json", "table2.json"):
@@ -46,6 +52,7 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     for n in c:
         assert resumed[n]["unique_regions"]["per_episode"] == c[n]["unique_regions"]["per_episode"], n
         assert resumed[n]["freeze_ratio"]["seed_values"] == c[n]["freeze_ratio"]["seed_values"], n
+        assert resumed[n]["r_hat_corr_pooled"]["seed_values"] == pooled[n], n  # DTK's models came from disk
     assert main(["reproduce", "table2", "--config", str(cfg), "--seeds", "3", "--out", str(out), "--quiet",
                  "--resume"]) == 2
     assert "the config differs" in capsys.readouterr().err
