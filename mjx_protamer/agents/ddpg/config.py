@@ -128,7 +128,8 @@ def batched_ddpg() -> DDPGConfig:
     paper's sigma 0.6 and tau 0.001, batched self-touch training collapses after ~30k env steps. A quarter of the
     envs act without noise (`quiet_fraction`): over 5 seeds at 256k env steps the test policy's freeze ratio
     was 0.12 +- 0.11 (seed std 0.09) with them and 0.19 +- 0.23 (std 0.18) without (docs/experiments.md)."""
-    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042, quiet_fraction=0.25))
+    return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042, quiet_fraction=0.25),
+                      actor_preact_coef=0.1)
 
 
 @dataclass(frozen=True)
