@@ -132,3 +132,16 @@ def test_networks_shapes_and_action_enters_critic_second_layer():
     # Small final layers: initial actions and values are near zero.
     x = jax.random.normal(jax.random.PRNGKey(2), (5, 84))
     assert float(jnp.abs(actor.apply(a_params, x)).max()) < 0.1
+
+
+def test_preact_penalty_is_a_wall_past_the_free_band_and_moves_a_saturated_actor():
+    """The hinge penalty is 0 (and its gradient too) while |pre-tanh| <= free, quadratic beyond; a critic
+    that is flat in the action leaves only the penalty, which pulls a saturated output back inside."""
+    pre = jnp.array([[0.5, -1.9, 3.0, -4.0]])
+    actor_apply = lambda p, obs, pre_tanh=False: p["pre"] if pre_tanh else jnp.tanh(p["pre"])
+    flat_critic = lambda cp, obs, a: jnp.zeros((a.shape[0],))
+    loss = lambda p, free: losses.actor_loss(p, actor_apply, None, flat_critic, jnp.zeros((1, 3)), 0.5, free)
+    assert np.isclose(float(loss({"pre": pre}, 2.0)), 0.5 * (1.0 + 4.0) / 4)
+    g = jax.grad(loss)({"pre": pre}, 2.0)["pre"]
+    np.testing.assert_allclose(g, [[0.0, 0.0, 0.25, -0.5]], atol=1e-7)  # inside the band: no pull toward 0
+    assert np.isclose(float(loss({"pre": pre}, 0.0)), 0.5 * float(jnp.mean(pre**2)))  # free 0: the plain L2

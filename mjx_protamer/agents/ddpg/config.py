@@ -53,6 +53,7 @@ class DDPGConfig:
     reward_alpha: float = 1.0
     reward_beta: float = 0.1
     actor_preact_coef: float = 0.0  # penalty on the actor's pre-tanh activations (losses.actor_loss)
+    actor_preact_free: float = 0.0  # pre-tanh magnitude the penalty leaves free (0: a pull toward 0 everywhere)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -65,6 +66,7 @@ class DDPGConfig:
         check(0.0 <= self.gamma < 1.0, "gamma", f"must be in [0, 1), got {self.gamma}")
         check(0.0 < self.tau <= 1.0, "tau", f"must be in (0, 1], got {self.tau}")
         check(self.actor_preact_coef >= 0, "actor_preact_coef", f"must be >= 0, got {self.actor_preact_coef}")
+        check(self.actor_preact_free >= 0, "actor_preact_free", f"must be >= 0, got {self.actor_preact_free}")
         check(self.batch_size >= 1, "batch_size", f"must be >= 1, got {self.batch_size}")
         check(self.reward_alpha >= 0.0, "reward_alpha", f"must be >= 0, got {self.reward_alpha}")
         check(self.reward_beta >= 0.0, "reward_beta", f"must be >= 0, got {self.reward_beta}")

@@ -43,15 +43,18 @@ def td_target(reward, next_q, terminal, gamma: float) -> jax.Array:
     return jax.lax.stop_gradient(reward + gamma * (1.0 - terminal) * next_q)
 
 
-def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.Array, preact_coef: float = 0.0):
-    """Deterministic policy gradient: maximise Q(s, mu(s)), less `preact_coef * mean(pre-tanh^2)`.
+def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.Array, preact_coef: float = 0.0,
+               preact_free: float = 0.0):
+    """Deterministic policy gradient: maximise Q(s, mu(s)), less `preact_coef * mean(max(|pre| - free, 0)^2)`
+    over the pre-tanh activations.
 
     Once the actor's pre-activations grow past ~3, tanh is flat and the critic's gradient no longer moves
     the action: the policy sticks in a corner of the action box. The penalty keeps it where it can learn.
+    With `preact_free` > 0 it is a wall, not a pull: actions inside |a| < tanh(free) are not biased toward 0.
     """
     pre = actor_apply(actor_params, obs, True)
     q = critic_apply(critic_params, obs, jnp.tanh(pre))
-    return -jnp.mean(q) + preact_coef * jnp.mean(pre**2)
+    return -jnp.mean(q) + preact_coef * jnp.mean(jnp.maximum(jnp.abs(pre) - preact_free, 0.0) ** 2)
 
 
 def soft_update(target, online, tau: float):

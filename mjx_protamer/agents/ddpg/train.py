@@ -191,7 +191,8 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         critic_params = optax.apply_updates(lr.critic_params, c_updates)
 
         a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(
-            lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs, dc.actor_preact_coef)
+            lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs, dc.actor_preact_coef,
+            dc.actor_preact_free)
         a_updates, actor_opt_state = actor_opt.update(pmean(a_grads), lr.actor_opt_state, lr.actor_params)
         actor_params = optax.apply_updates(lr.actor_params, a_updates)
 
