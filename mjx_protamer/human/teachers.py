@@ -72,7 +72,8 @@ class Clause:
 # feedback. It asks for something the intrinsic reward is blind to (which hand touches), so feedback has
 # something to change; and its signs are balanced on the baseline's behaviour, which touches with both hands.
 # With threshold 0.5: the right hand alone touching while moving is approved (+1); the left hand (-1) and a
-# freeze (-1) are not; both hands (0) and a frozen right-hand touch (0) get no feedback.
+# freeze (-1) are not; both hands (0) and a frozen right-hand touch (0) get no feedback. "Frozen" is the freeze
+# metric's own definition (arm joint speed below env.freeze_speed, 1 rad/s; obs 64:68,70:74 are those joints).
 # Measured, 5 seeds at 256k (docs/experiments.md): with the right hand worth +0.5 (a frozen right-hand touch
 # then scored -0.5 and was disapproved), the score's ceiling was 0.5 and the baseline already reached 0.42 on
 # two seeds, so feedback could not raise it beyond the seeds' spread; +1 leaves room. Against the first
@@ -81,7 +82,7 @@ class Clause:
 SELF_TOUCH_RULE = (
     Clause("obs_norm:26:52", 1.0, above=0.05, sustain=20),  # right hand or fingers touching, held 0.1 s
     Clause("obs_norm:0:26", -1.0, above=0.05, sustain=20),  # left hand or fingers touching, held 0.1 s
-    Clause("obs_norm:64:68,70:74", -1.0, below=0.5, sustain=60),  # arms frozen (< 0.5 rad/s) for 0.3 s
+    Clause("obs_norm:64:68,70:74", -1.0, below=1.0, sustain=60),  # arms frozen (< 1 rad/s) for 0.3 s
 )
 # (The first version's rule read reward terms: a region onset, which lasts one step, and the joint-limit
 # term, which was active on 100% of training steps; a reward model could not learn it: issue 8.)

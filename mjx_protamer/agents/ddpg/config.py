@@ -129,9 +129,13 @@ def batched_ddpg() -> DDPGConfig:
     jitter (the movement band is then never met and the critic never sees a slow or frozen arm). With the
     paper's sigma 0.6 and tau 0.001, batched self-touch training collapses after ~30k env steps. A quarter of the
     envs act without noise (`quiet_fraction`): over 5 seeds at 256k env steps the test policy's freeze ratio
-    was 0.12 +- 0.11 (seed std 0.09) with them and 0.19 +- 0.23 (std 0.18) without (docs/experiments.md)."""
+    was 0.12 +- 0.11 (seed std 0.09) with them and 0.19 +- 0.23 (std 0.18) without (docs/experiments.md).
+    A wall on the actor's pre-tanh activations past 2 (|a| > 0.96): with feedback, a seed's actor sat with 91%
+    of its action dimensions at |a| > 0.99, where tanh passes no gradient, frozen in the teacher's disapproval;
+    with the wall 0.2% (docs/experiments.md). A plain L2 pull (coef 0.1, free 0) also removed the saturation
+    but biased every action toward 0 and changed the baseline (freeze 0.22, seed std 0.18)."""
     return DDPGConfig(tau=0.005, noise=NoiseConfig(kind="ou", theta=0.01, sigma=0.042, quiet_fraction=0.25),
-                      actor_preact_coef=0.1)
+                      actor_preact_coef=1.0, actor_preact_free=2.0)
 
 
 @dataclass(frozen=True)
