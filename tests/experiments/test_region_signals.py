@@ -73,7 +73,8 @@ def runs():
     ts, fs = holding_pose(ft.trainer.init(key)), ft.init(cfg.pretrain.train.seed)
     ts, fs, metrics, events = ft.chunk(ts, fs, ft.params("keyboard", cfg.feedback.credit))
     mask = np.asarray(ref_extras["region_mask"])  # (T, B, 8): what the env said each step touched
-    return dict(cfg=cfg, env=env, mask=mask, ref_obs=np.asarray(ref_steps.obs), run=run, host_events=host_events,
+    return dict(cfg=cfg, env=env, mask=mask, ref_obs=np.asarray(ref_steps.obs),
+                ref_terms=np.asarray(ref_steps.reward_terms), run=run, host_events=host_events,
                 ts=ts, metrics=jax.device_get(metrics), events=jax.device_get(events), ft=ft)
 
 
@@ -110,6 +111,15 @@ def test_region_clauses_fire_exactly_where_the_mask_says_in_jit_and_on_the_host(
 def test_the_region_mask_rides_beside_the_transitions_not_in_the_replay(runs):
     from mjx_protamer.agents.ddpg.replay import Transition
 
+    # the mask is of the step each transition reached: the reward's `region` term pays a new region exactly
+    # where the mask gains one over the step before
+    reward = runs["cfg"].pretrain.env.reward
+    assert reward.region_new != reward.region_stale
+    mask = runs["mask"] > 0
+    new = (mask[1:] & ~mask[:-1]).any(-1)
+    region_term = runs["ref_terms"][1:, :, runs["env"].reward_term_names.index("region")]
+    assert new.any() and np.array_equal(region_term == reward.region_new, new)
+
     replay = runs["ts"].replay.data
     assert type(replay) is Transition and replay._fields == ("obs", "action", "reward_terms", "next_obs", "terminal")
     assert all(x.shape[0] == runs["cfg"].pretrain.ddpg.replay_size for x in replay)
@@ -119,6 +129,7 @@ def test_region_signals_are_a_config_error_where_there_are_no_regions_or_no_such
     from mjx_protamer.experiments.env_factory import make_env
     from mjx_protamer.experiments.feedback_train import make_feedback_train
     from mjx_protamer.experiments.table2 import Table2Config
+    from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
     from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
 
     from toy_feedback import toy_feedback_config
@@ -129,8 +140,10 @@ def test_region_signals_are_a_config_error_where_there_are_no_regions_or_no_such
     toy_env = make_env(toy.pretrain)
     with pytest.raises(ConfigError, match="'region:head' reads body regions, and this env has none"):
         make_feedback_train(toy.pretrain, toy_env, toy.feedback)
-    with pytest.raises(ConfigError, match="this env has none"):  # the host teacher checks before it runs
+    with pytest.raises(ConfigError, match="this env has none"):  # the host teachers check before they run
         TamerRun(FeedbackRunConfig(toy.pretrain, toy.feedback), toy_env, feedback="simulated:keyboard")
+    with pytest.raises(ConfigError, match="this env has none"):
+        CoachRun(CoachRunConfig(), toy_env, feedback="simulated:keyboard", teacher=toy.feedback.teacher)
     cfg = runs["cfg"]
     bad = dataclasses.replace(cfg.feedback, teacher=from_dict(type(cfg.feedback.teacher), {
         **TEACHER, "rule": [{"signal": "region:foot", "value": 1.0, "above": 0.5}]}))
