@@ -75,7 +75,8 @@ class Learner(NamedTuple):
 class Trainer(NamedTuple):
     init: Callable[[jax.Array], TrainState]
     train_chunk: Callable[[TrainState, Any], tuple[TrainState, dict]]
-    collect_chunk: Callable[[TrainState, Any], tuple[TrainState, dict, replay.Transition, dict]]  # + (T, B, ...) steps
+    # + the (T, B, ...) steps and their extras
+    collect_chunk: Callable[[TrainState, Any], tuple[TrainState, dict, replay.Transition, dict]]
     chunk_body: Callable  # collect_chunk unjitted, per device (inside shard_map over AXIS when sharded)
     train: Callable | None  # None when sharded over several devices
     act: Callable[[Any, jax.Array], jax.Array]  # deterministic actor
@@ -266,7 +267,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
 
     def _collect_chunk(ts: TrainState, human_params):
         ts, (stats, (transitions, extras)) = jax.lax.scan(lambda t, _: _iteration(t, human_params), ts, None,
-                                                length=tc.chunk_steps)
+                                                          length=tc.chunk_steps)
         total = jax.tree.map(lambda x: psum(jnp.sum(x, axis=0)), stats)
         env_steps = tc.chunk_steps * tc.num_envs
         updates = jnp.maximum(total["updates"] / (n_dev if sharded else 1), 1.0)
