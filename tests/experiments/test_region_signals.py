@@ -5,7 +5,7 @@ beside the chunk's transitions without entering the replay.
 One tiny self-touch setup (4 envs, one 100-step chunk) and two compiled chunks (the host loop's and the
 in-jit one). Random actions never reach the head in so few steps, so the actor holds one pose that does: its
 last layer's kernel is zeroed and its bias is the pose (found by holding 512 random poses for 1 s: with this
-one the hip is touched from ~0.1 s and the head from ~0.2 s, at separate times), without noise and with a
+one the hip is touched from ~0.1 s and the head from ~0.2 s, mostly at separate times), without noise and with a
 learning rate too small to move it (0 is refused). Every path then steps the same worlds.
 """
 
