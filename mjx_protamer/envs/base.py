@@ -6,6 +6,8 @@ An env is written for ONE world. Batching, episode length and auto-reset are wra
 - `env.observation_size`, `env.action_size` (actions live in [-1, 1]);
 - `env.reward_term_names` and `env.reward_weights`: the reward is
   `metrics["reward_terms"] @ weights`, so a learner can store the terms and relabel at sample time;
+- `env.region_names` (optional; empty or absent for an env without a body): the body regions, in the
+  order of `metrics["region_mask"]`, which teacher rules may read (`region:NAME`, `regions_touched`);
 - `state.metrics` holds what the transition produced (reward terms, contact signals): wrappers
   never reset it; `state.info` holds carried state (reset on auto-reset);
 - `state.info["truncation"]` is 1.0 where an episode ended by its time limit (bootstrap through it),

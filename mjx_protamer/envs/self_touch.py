@@ -29,6 +29,7 @@ class SelfTouchEnv:
         self.observation_size = self.config.observation_size
         self.action_size = m.nu
         self.reward_term_names = REWARD_TERMS
+        self.region_names = body.REGIONS  # the order of metrics["region_mask"]
         self.reward_weights = self.config.reward.weights()
         self._tables = self.model.sensing.as_xp(jnp)
         self._weights = jnp.asarray(self.reward_weights, jnp.float32)

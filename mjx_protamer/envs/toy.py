@@ -39,6 +39,7 @@ class PointReachEnv:
     observation_size = 6
     action_size = 2
     reward_term_names = ("distance", "effort", "reach")
+    region_names: tuple[str, ...] = ()  # no body: its region_mask is an octant stand-in for the metrics only
 
     def __init__(self, config: ToyEnvConfig | None = None):
         self.config = config or ToyEnvConfig()

@@ -5,8 +5,9 @@
 1. the DDPG chunk (`chunk_steps` vectorised steps under `lax.scan`, `Trainer.chunk_body`) with the human
    reward `gain * r_hat(params, s, a)` relabelled at sample time (`gain` 0 is DDPG alone, bit for bit the same
    reward; the reward-model params are an argument: no recompile when they change). Its scan emits the
-   chunk's transitions, (T, B, ...) in stepping order; the teacher signals are reward terms by name (or
-   `obs:i` / `action:i` / `obs_norm:...`) of those steps;
+   chunk's transitions, (T, B, ...) in stepping order, and beside them the region mask of each step; the
+   teacher signals are read from those steps (`teachers.rule_signals`: reward terms by name, `obs:i`,
+   `action:i`, `obs_norm:...`, `region:NAME`, `regions_touched`);
 2. one simulated teacher per env (`teachers.batched_teacher`, on the same core as the host teacher) scores the
    steps; feedback reaches the learner at arrival step = judged step + (reaction delay + utterance +
    processing latency) / dt, through a pending ring;
@@ -53,7 +54,7 @@ from mjx_protamer.human.batched import FeedbackRing, draw_credited_steps, reward
 from mjx_protamer.human.credit import CreditConfig, lag_weights
 from mjx_protamer.human.reward_model import RewardMLP, reward_fn
 from mjx_protamer.human.teachers import (BatchedTeacherState, TeacherConfig, batched_teacher, batched_teacher_init,
-                                         obs_norm_indices, with_channel)
+                                         env_signal_columns, rule_signals, with_channel)
 
 KINDS = ("keyboard", "prosody", "speech")
 
@@ -128,33 +129,8 @@ class FeedbackTrainer(NamedTuple):
     max_events: int
     apply: Any  # r_hat(params, obs, action)
     chunk_fn: Any  # `chunk` before jit (shard_mapped over the mesh when sharded), to vmap over seeds
-    signals: Any  # (obs, action, reward_terms) (..., dims) -> (..., C) the teacher rule's signals
+    signals: Any  # (obs, action, reward_terms, region_mask) (..., dims) -> (..., C) the teacher rule's signals
     history_len: int  # H: steps of (obs, action) per env carried for credit into earlier chunks
-
-
-def _signal_columns(names, term_names, obs_size, act_size):
-    cols = []
-    for name in names:
-        if name in term_names:
-            cols.append(("terms", term_names.index(name)))
-        elif name.startswith("obs_norm:"):  # L2 norm over obs slices, e.g. obs_norm:64:68,70:74 (arm speed)
-            cols.append(("obs_norm", obs_norm_indices(name, obs_size)))
-        elif name.startswith("obs:") and 0 <= int(name[4:]) < obs_size:
-            cols.append(("obs", int(name[4:])))
-        elif name.startswith("action:") and 0 <= int(name[7:]) < act_size:
-            cols.append(("action", int(name[7:])))
-        else:
-            raise ConfigError(f"config field 'feedback.teacher.rule': signal {name!r} is not a reward term "
-                              f"({', '.join(term_names)}), obs:i, obs_norm:a:b[,c:d] or action:i "
-                              "(the in-jit teacher reads these)")
-    return tuple(cols)
-
-
-def rule_signals(cols, obs, action, terms):
-    """The teacher rule's signal columns (`_signal_columns`) from per-step obs, action and reward terms."""
-    src = {"terms": terms, "obs": obs, "action": action}
-    return jnp.stack([jnp.linalg.norm(obs[..., jnp.asarray(i)], axis=-1) if s == "obs_norm" else src[s][..., i]
-                      for s, i in cols], axis=-1)
 
 
 def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | None = None) -> FeedbackTrainer:
@@ -174,8 +150,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     net = RewardMLP(hidden)
     opt = optax.adam(rmc.learning_rate)
     obs_size, act_size = env.observation_size, env.action_size
-    term_names = tuple(env.reward_term_names)
-    cols = _signal_columns(fc.teacher.signals, term_names, obs_size, act_size)
+    cols = env_signal_columns(fc.teacher.signals, env)
     dt = fc.dt
     kind_cfgs = [with_channel(fc.teacher, k) for k in KINDS]
     L = max(len(lag_weights(dataclasses.replace(fc.credit, scheme=s), dt, c.channel))
@@ -224,9 +199,9 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     def chunk(ts, fs: FeedbackState, fp: FeedbackParams):
         it0 = ts.iteration
         hp = {"params": fs.rm_params, "gain": fp.gain}
-        ts, metrics, steps = trainer.chunk_body(ts, hp)
+        ts, metrics, steps, extras = trainer.chunk_body(ts, hp)
         obs, action, terms = steps.obs, steps.action, steps.reward_terms  # (T, local_B, ...)
-        signals = rule_signals(cols, obs, action, terms)
+        signals = rule_signals(cols, obs, action, terms, extras.get("region_mask"))
         rng, k_teach, k_lag, k_fresh = jax.random.split(fs.rng, 4)
         env_ids = (jax.lax.axis_index(AXIS) * local_B if sharded else 0) + jnp.arange(local_B)
         active = (fp.teach > 0) & (env_ids < teach_envs)
@@ -293,7 +268,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         chunk_fn = chunk
     return FeedbackTrainer(trainer=trainer, init=init, chunk=jax.jit(chunk_fn, donate_argnums=(0, 1)),
                            params=params_for, lag_len=L, max_events=E, apply=apply, chunk_fn=chunk_fn,
-                           signals=lambda o, a, t: rule_signals(cols, o, a, t), history_len=H)
+                           signals=lambda o, a, t, r: rule_signals(cols, o, a, t, r), history_len=H)
 
 
 def log_events(log, events: dict, kind: str, feedback, dt: float) -> int:

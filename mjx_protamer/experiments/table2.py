@@ -279,8 +279,8 @@ def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untraine
     @jax.jit
     def run(actor_params, rm_params, untrained_params, keys):
         sig = rollout(actor_params, keys)
-        score = jax.vmap(lambda o, a, t: rule_scores(teacher, ft.signals(o, a, t)))(
-            sig["obs"], sig["action"], sig["reward_terms"])
+        score = jax.vmap(lambda o, a, t, r: rule_scores(teacher, ft.signals(o, a, t, r)))(
+            sig["obs"], sig["action"], sig["reward_terms"], sig["region_mask"])
         r_hat = ft.apply(rm_params, sig["obs"], sig["action"])
         r_hat0 = ft.apply(untrained_params, sig["obs"], sig["action"])
         keep = ("reward", "self_contact", "region_mask", "arm_speed")

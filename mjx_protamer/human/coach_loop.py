@@ -31,7 +31,7 @@ from mjx_protamer.agents.coach import CoachConfig, CoachLearner
 from mjx_protamer.agents.coach.networks import log_prob
 from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
-from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, signal_matrix, with_channel
+from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, env_signal_columns, rule_signals, with_channel
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,6 +56,8 @@ def _rollout(venv, apply, min_log_std, chunk_steps, params, state, key):
         out = {"obs": s.obs[0], "action": a[0], "logp": lp[0], "reward": ns.reward[0],
                "reward_terms": ns.metrics["reward_terms"][0],
                "contact": jnp.asarray(ns.metrics.get("self_contact", jnp.zeros((1,))), jnp.float32).reshape(-1)[0]}
+        if getattr(venv, "region_names", ()):  # what a teacher rule's region signals read
+            out["region_mask"] = ns.metrics["region_mask"][0]
         return ns, out
 
     state, out = jax.lax.scan(step, state, jax.random.split(key, chunk_steps))
@@ -93,6 +95,7 @@ class CoachRun:
             tcfg = teacher or TeacherConfig()
             kind = feedback.split(":", 1)[1] if ":" in feedback else tcfg.channel.kind
             self.teacher = HostTeacher(with_channel(tcfg, kind), config.dt, seed=config.seed)
+            self.teacher_cols = env_signal_columns(tcfg.signals, env)
         self.first_step = 0
         self.events = 0
         self.corrections = 0
@@ -126,8 +129,8 @@ class CoachRun:
         self.learner.record(first, out["obs"], out["action"], out["logp"])
         self.last_chunk = {"first_step": first, "t0": t0, "obs": out["obs"], "action": out["action"]}
         if self.teacher is not None:
-            sig = signal_matrix(self.teacher.config.signals, tuple(self.env.reward_term_names),
-                                out["reward_terms"], obs=out["obs"], action=out["action"])
+            sig = rule_signals(self.teacher_cols, out["obs"], out["action"], out["reward_terms"],
+                               out.get("region_mask"), xp=np)
             self.teacher.observe(first, times, sig)
             self.teacher.emit_due(self.queue, self.clock())
         self.process_events(step=first + n - 1)

@@ -32,7 +32,7 @@ from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
 from mjx_protamer.human.reward_model import RewardModel, RewardModelConfig
-from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, signal_matrix, with_channel
+from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, env_signal_columns, rule_signals, with_channel
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,6 +108,7 @@ class TamerRun:
         if self.simulated:
             kind = feedback.split(":", 1)[1] if ":" in feedback else fc.teacher.channel.kind
             self.teacher = HostTeacher(with_channel(fc.teacher, kind), fc.dt, seed=fc.seed)
+            self.teacher_cols = env_signal_columns(fc.teacher.signals, env)
         self.first_step = 0
         self.credited = 0
         self.events = 0
@@ -124,19 +125,20 @@ class TamerRun:
         self.model.params = jax.device_put(self.model.params, device)
         self.model.opt_state = jax.device_put(self.model.opt_state, device)
 
-    def _watched_rows(self, steps) -> dict[str, np.ndarray]:
+    def _watched_rows(self, steps, extras) -> dict[str, np.ndarray]:
         w = self.config.feedback.watch_env
         obs, action, terms = jax.device_get((steps.obs[:, w], steps.action[:, w], steps.reward_terms[:, w]))
-        return {"obs": obs, "action": action, "reward_terms": terms}
+        regions = np.asarray(extras["region_mask"][:, w]) if "region_mask" in extras else None
+        return {"obs": obs, "action": action, "reward_terms": terms, "region_mask": regions}
 
     def step_chunk(self, t0: float | None = None) -> dict:
         """One DDPG chunk, then the feedback path. `t0`: presentation time of the chunk's first step
         (default: the clock now). Returns the chunk's metrics plus feedback counters."""
         tc, fc = self.config.pretrain.train, self.config.feedback
         params = self.model.params if self.use_model else None
-        self.state, metrics, steps = self.trainer.collect_chunk(self.state, params)
+        self.state, metrics, steps, extras = self.trainer.collect_chunk(self.state, params)
         metrics = jax.device_get(metrics)
-        rows = self._watched_rows(steps)
+        rows = self._watched_rows(steps, extras)
         n, first = tc.chunk_steps, self.first_step
         t0 = self.clock() if t0 is None else t0
         if len(self.step_clock):  # a chunk computed faster than real time is shown after the previous one
@@ -148,8 +150,8 @@ class TamerRun:
         # what a live view draws and a session record keeps: the watched env's steps and their times
         self.last_chunk = {"first_step": first, "t0": t0, "obs": rows["obs"], "action": rows["action"]}
         if self.teacher is not None:
-            sig = signal_matrix(self.teacher.config.signals, tuple(self.env.reward_term_names),
-                                rows["reward_terms"], obs=rows["obs"], action=rows["action"])
+            sig = rule_signals(self.teacher_cols, rows["obs"], rows["action"], rows["reward_terms"],
+                               rows["region_mask"], xp=np)
             self.teacher.observe(first, times, sig)
             self.teacher.emit_due(self.queue, self.clock())
         accepted = self.process_events(step=first + n - 1)

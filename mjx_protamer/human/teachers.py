@@ -3,12 +3,19 @@
 There is no human in CI; a simulated teacher stands in for one, reproducibly (seeded).
 
 Scoring rule (hidden from the learner)
-    A list of clauses over named per-step signals. A signal is a reward term of the env (by name, e.g.
-    "region", "contact", "movement", "joint_limit"), a per-step metric (e.g. "self_contact", "arm_speed"),
-    "obs:i" / "action:i", or "obs_norm:a:b[,c:d]" (the L2 norm of obs slices). A clause fires when its signal
-    is above `above` and below `below` for `sustain` consecutive steps; the step's score is the clipped sum
-    of the fired clauses' values. The default rule (self-touch, `SELF_TOUCH_RULE`): approve touching with
-    the right hand while moving, disapprove the left hand and a freeze; see there why it is built that way.
+    A list of clauses over named per-step signals. A clause fires when its signal is above `above` and
+    below `below` for `sustain` consecutive steps; the step's score is the clipped sum of the fired clauses'
+    values. The signals (`signal_columns` resolves them against the env, `rule_signals` extracts them, the
+    one implementation for the in-jit chunk, table2's test episodes and the host teacher):
+    - a reward term of the env by name (e.g. "region", "contact", "movement", "joint_limit");
+    - "obs:i", "action:i", and "obs_norm:a:b[,c:d]" (the L2 norm of obs slices, e.g. arm speed);
+    - "region:NAME": 1.0 while that body region is touched (the env's per-step `region_mask`; NAME one of
+      `env.region_names`: hip, lower_body, upper_body, head, left/right_upper_arm, left/right_lower_arm);
+    - "regions_touched": how many body regions are touched this step (0-8).
+    Region signals let a rule ask where to touch ("touch your head", "touch many places"); the reward model
+    still learns from (s, a) only. An env without regions (the toy) rejects them as a config error.
+    The default rule (self-touch, `SELF_TOUCH_RULE`): approve touching with the right hand while moving,
+    disapprove the left hand and a freeze; see there why it is built that way.
 
 Giving model
     A step whose |score| >= threshold is eligible; the teacher gives with probability `give_rate`, never
@@ -45,7 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjx_protamer.config import check
+from mjx_protamer.config import ConfigError, check
 from mjx_protamer.human.channels import ChannelConfig  # noqa: F401  (re-exported: configs name it here)
 from mjx_protamer.human.events import FeedbackEvent
 
@@ -274,43 +281,92 @@ def batched_teacher(configs, dt: float, state: BatchedTeacherState, signals: jax
 
 
 # ------------------------------------------------------------------------------------------------
-# Host variant: watches one env, feeds the real queue.
+# Signals: what a rule's clauses read, resolved against the env once and extracted by one function.
+
+RULE_FIELD = "config field 'feedback.teacher.rule'"
+
+
+def _is_int(x: str) -> bool:
+    return x.strip().lstrip("-").isdigit()
+
 
 def obs_norm_indices(name: str, obs_size: int) -> tuple[int, ...]:
     """'obs_norm:64:68,70:74' -> the obs indices whose L2 norm is the signal (e.g. the arm joint speed)."""
-    from mjx_protamer.config import ConfigError
-
     idx: list[int] = []
     for part in name[len("obs_norm:"):].split(","):
-        a, b = (int(x) for x in part.split(":"))
+        bounds = part.split(":")
+        a, b = (int(x) for x in bounds) if len(bounds) == 2 and all(_is_int(x) for x in bounds) else (0, -1)
         if not 0 <= a < b <= obs_size:
-            raise ConfigError(f"config field 'feedback.teacher.rule': {name!r} slices outside obs [0, {obs_size})")
+            raise ConfigError(f"{RULE_FIELD}: {name!r} is not obs_norm:a:b[,c:d] with slices inside obs "
+                              f"[0, {obs_size})")
         idx += list(range(a, b))
     return tuple(idx)
 
 
-def signal_matrix(names: tuple[str, ...], term_names: tuple[str, ...], reward_terms=None, metrics=None,
-                  obs=None, action=None) -> np.ndarray:
-    """(T, C) signals for a rule from a chunk's per-step arrays: reward terms by name, metrics by key,
-    "obs:i" and "action:i"."""
+class SignalColumn(NamedTuple):
+    source: str  # "terms", "obs", "action", "obs_norm", "region" or "regions_touched"
+    index: int | tuple[int, ...]  # the column (or obs indices for obs_norm; unused for regions_touched)
+
+
+def signal_columns(names, term_names, obs_size: int, act_size: int,
+                   region_names: tuple[str, ...] = ()) -> tuple[SignalColumn, ...]:
+    """Resolve a rule's signal names against an env once (a ConfigError naming the bad signal otherwise).
+    `region_names` are the env's body regions in region-mask order; empty for an env without regions."""
     cols = []
     for name in names:
-        if name.startswith("obs_norm:"):
-            o = np.asarray(obs)
-            cols.append(np.linalg.norm(o[:, list(obs_norm_indices(name, o.shape[1]))], axis=1))
-        elif name.startswith("obs:"):
-            cols.append(np.asarray(obs)[:, int(name[4:])])
-        elif name.startswith("action:"):
-            cols.append(np.asarray(action)[:, int(name[7:])])
-        elif name in term_names and reward_terms is not None:
-            cols.append(np.asarray(reward_terms)[:, term_names.index(name)])
-        elif metrics is not None and name in metrics:
-            cols.append(np.asarray(metrics[name]).reshape(len(np.asarray(metrics[name])), -1)[:, 0])
+        if name in term_names:
+            cols.append(SignalColumn("terms", term_names.index(name)))
+        elif name.startswith("obs_norm:"):  # L2 norm over obs slices, e.g. obs_norm:64:68,70:74 (arm speed)
+            cols.append(SignalColumn("obs_norm", obs_norm_indices(name, obs_size)))
+        elif name.startswith("obs:") and _is_int(name[4:]) and 0 <= int(name[4:]) < obs_size:
+            cols.append(SignalColumn("obs", int(name[4:])))
+        elif name.startswith("action:") and _is_int(name[7:]) and 0 <= int(name[7:]) < act_size:
+            cols.append(SignalColumn("action", int(name[7:])))
+        elif name.startswith("region:") or name == "regions_touched":
+            if not region_names:
+                raise ConfigError(f"{RULE_FIELD}: signal {name!r} reads body regions, and this env has none "
+                                  "(region signals need the self-touch env)")
+            if name == "regions_touched":
+                cols.append(SignalColumn("regions_touched", 0))
+            elif name[7:] in region_names:
+                cols.append(SignalColumn("region", region_names.index(name[7:])))
+            else:
+                raise ConfigError(f"{RULE_FIELD}: signal {name!r} names no body region; allowed: "
+                                  + ", ".join(f"region:{r}" for r in region_names))
         else:
-            raise KeyError(f"teacher signal {name!r} is not a reward term ({', '.join(term_names)}), "
-                           f"a metric ({', '.join(sorted(metrics or {}))}), obs:i or action:i")
-    return np.stack(cols, axis=1).astype(np.float32)
+            raise ConfigError(f"{RULE_FIELD}: signal {name!r} is not a reward term ({', '.join(term_names)}), "
+                              "obs:i, obs_norm:a:b[,c:d], action:i, region:NAME or regions_touched")
+    return tuple(cols)
 
+
+def env_signal_columns(names, env) -> tuple[SignalColumn, ...]:
+    """`signal_columns` for an env on the env contract (`region_names` is optional there)."""
+    return signal_columns(names, tuple(env.reward_term_names), env.observation_size, env.action_size,
+                          tuple(getattr(env, "region_names", ())))
+
+
+def rule_signals(cols, obs, action, terms, region_mask=None, xp=jnp):
+    """The rule's signals (..., C) from per-step obs, action, reward terms and region mask (..., dims).
+
+    The one extraction every evaluation of a rule runs: inside jit on a chunk's emitted steps (xp = jax.numpy),
+    on test episodes (table2's `teacher_score`) and on the host for `HostTeacher` (xp = numpy). The region
+    mask is the env's per-step `region_mask` of the step reached, the step whose reward terms are given."""
+    def column(c: SignalColumn):
+        if c.source == "obs_norm":
+            return xp.linalg.norm(obs[..., xp.asarray(c.index)], axis=-1)
+        if c.source in ("region", "regions_touched") and region_mask is None:
+            raise ValueError("the rule reads body regions and no region mask was given for these steps")
+        if c.source == "region":
+            return (region_mask[..., c.index] > 0).astype(xp.float32)
+        if c.source == "regions_touched":
+            return xp.sum(region_mask > 0, axis=-1).astype(xp.float32)
+        return {"terms": terms, "obs": obs, "action": action}[c.source][..., c.index]
+
+    return xp.stack([column(c) for c in cols], axis=-1).astype(xp.float32)
+
+
+# ------------------------------------------------------------------------------------------------
+# Host variant: watches one env, feeds the real queue.
 
 class HostTeacher:
     """A simulated teacher for one env that puts timed events into a FeedbackQueue.

@@ -24,7 +24,7 @@ SCRIPT = textwrap.dedent(
     for _ in range(config.train.num_chunks):
         state, m = trainer.train_chunk(state, None)
     ptr0 = int(state.replay.ptr)
-    state, m, steps = trainer.collect_chunk(state, None)  # the emitted transitions, split over devices by env
+    state, m, steps, _ = trainer.collect_chunk(state, None)  # the emitted transitions, split over devices by env
     T = config.train.chunk_steps
     rows = (ptr0 + np.arange(T)[:, None] * 2 + np.arange(2)) % 500  # each device's own replay (500 rows)
     emitted_match = all(np.array_equal(np.asarray(r.data)[rows], np.asarray(e.data))

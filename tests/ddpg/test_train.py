@@ -167,7 +167,8 @@ def test_chunk_emits_the_transitions_it_stores_and_train_chunk_does_not_pay_for_
     for _ in range(2):  # the second chunk wraps the 1000-row replay (2 x 800 rows)
         ptr0 = int(b.replay.ptr)
         a, ma = trainer.train_chunk(a, None)
-        b, mb, steps = trainer.collect_chunk(b, None)
+        b, mb, steps, extras = trainer.collect_chunk(b, None)
+        assert extras == {}  # the toy env has no body regions: nothing beside the transitions
         assert steps.obs.shape == (tc.chunk_steps, tc.num_envs, 6) and steps.terminal.shape == (100, 8)
         rows = (ptr0 + np.arange(tc.chunk_steps)[:, None] * tc.num_envs + np.arange(tc.num_envs)) % 1000
         for field, emitted in zip(steps._fields, steps):

@@ -131,7 +131,7 @@ def test_feedback_flag_errors_name_the_problem(tmp_path, capsys):
 
 def test_teacher_signals_in_jit():
     from mjx_protamer.config import ConfigError
-    from mjx_protamer.experiments.feedback_train import _signal_columns
+    from mjx_protamer.human.teachers import signal_columns as _signal_columns
 
     cols = _signal_columns(("reach", "obs:3", "action:1", "obs_norm:0:2,4:5"), ("distance", "effort", "reach"), 6, 2)
     assert cols == (("terms", 2), ("obs", 3), ("action", 1), ("obs_norm", (0, 1, 4)))

@@ -11,7 +11,8 @@ from mjx_protamer.config import ConfigError, from_dict
 from mjx_protamer.human.clock import VirtualClock
 from mjx_protamer.human.queue import FeedbackQueue
 from mjx_protamer.human.teachers import (ChannelConfig, Clause, HostTeacher, TeacherConfig,
-                                         batched_teacher, batched_teacher_init, signal_matrix, with_channel)
+                                         batched_teacher, batched_teacher_init, rule_signals, signal_columns,
+                                         with_channel)
 
 DT = 0.01
 RULE = (Clause("region", 1.0, above=0.0), Clause("movement", -1.0, below=-0.25, sustain=5))
@@ -99,13 +100,36 @@ def test_host_teacher_feeds_the_real_queue_on_a_virtual_clock():
     assert all(e.value == 1.0 and e.source == "simulated" for e in events)
 
 
-def test_signal_matrix_reads_terms_metrics_obs_and_actions():
-    terms = np.array([[1.0, 2.0], [3.0, 4.0]])
-    m = signal_matrix(("b", "speed", "obs:1", "action:0"), ("a", "b"), terms, {"speed": np.array([5.0, 6.0])},
-                      obs=np.array([[0, 7.0], [0, 8.0]]), action=np.array([[9.0], [10.0]]))
-    np.testing.assert_array_equal(m, [[2, 5, 7, 9], [4, 6, 8, 10]])
-    with pytest.raises(KeyError, match="nope"):
-        signal_matrix(("nope",), ("a",), terms)
+def test_rule_signals_read_terms_obs_actions_and_regions_alike_in_numpy_and_jax():
+    """One extraction for every path: the host (numpy) and jit (jax.numpy) give the same columns."""
+    regions = ("hip", "head", "left_upper_arm")
+    cols = signal_columns(("b", "obs:1", "action:0", "obs_norm:0:2", "region:head", "regions_touched"), ("a", "b"),
+                          2, 1, regions)
+    terms = np.array([[1.0, 2.0], [3.0, 4.0]], np.float32)
+    obs, action = np.array([[3.0, 7.0], [0, 8.0]], np.float32), np.array([[9.0], [10.0]], np.float32)
+    mask = np.array([[0, 1, 1], [1, 0, 0]], np.float32)
+    expected = [[2, 7, 9, np.hypot(3, 7), 1, 2], [4, 8, 10, 8, 0, 1]]
+    host = rule_signals(cols, obs, action, terms, mask, xp=np)
+    in_jit = jax.jit(lambda *a: rule_signals(cols, *a))(obs, action, terms, mask)
+    np.testing.assert_allclose(host, expected, rtol=1e-6)
+    np.testing.assert_array_equal(host, np.asarray(in_jit))
+    assert host.dtype == np.float32
+    with pytest.raises(ValueError, match="region mask"):  # a path that reads regions must supply them
+        rule_signals(cols, obs, action, terms, None, xp=np)
+
+
+def test_signal_errors_name_the_field_and_what_is_allowed():
+    regions = ("hip", "head")
+    for names, region_names, match in (
+            (("nope",), regions, "'nope' is not a reward term"),
+            (("obs:x",), regions, "'obs:x' is not a reward term"),
+            (("obs_norm:1",), regions, "obs_norm:a:b"),
+            (("region:foot",), regions, "'region:foot' names no body region; allowed: region:hip, region:head"),
+            (("region:head",), (), "this env has none"),
+            (("regions_touched",), (), "this env has none")):
+        with pytest.raises(ConfigError, match="feedback.teacher.rule") as err:
+            signal_columns(names, ("a",), 2, 1, region_names)
+        assert match in str(err.value) and "\n" not in str(err.value)
 
 
 def test_teacher_config_from_yaml_dict():

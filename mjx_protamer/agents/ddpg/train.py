@@ -7,9 +7,11 @@ Shaped like PureJaxRL. `make_train(config, env)` returns pure functions:
   `lax.scan`; an iteration steps every env once (`_env_step`) and then makes `updates_per_step` gradient
   updates (`_update`: critic, actor, soft target update). Jitted once; `human_params` is an argument, so a
   new human-reward model never recompiles. The host (logging, progress, checkpoints) runs between chunks;
-- `collect_chunk(train_state, human_params) -> (train_state, metrics, transitions)`: the same chunk, and the
-  scan's per-iteration `replay.Transition`s, (chunk_steps, num_envs, ...), in the order they were stepped
-  (PureJaxRL's trajectory). `train_chunk` is this function with the transitions dropped: XLA removes the
+- `collect_chunk(train_state, human_params) -> (train_state, metrics, transitions, extras)`: the same chunk,
+  and the scan's per-iteration `replay.Transition`s, (chunk_steps, num_envs, ...), in the order they were
+  stepped (PureJaxRL's trajectory), with `extras`: per-step env outputs the replay does not store, beside
+  them (`region_mask`, (chunk_steps, num_envs, regions), for an env with body regions: what a teacher rule's
+  region signals read; {} otherwise). `train_chunk` is this function with both dropped: XLA removes the
   unused stacked outputs (the compiled temp and output sizes are those of a chunk that never emits them,
   checked in tests/ddpg/test_train.py), so nobody pays for them unless they ask;
 - `chunk_body`: `collect_chunk` before jit and shard_map (the per-device body over axis `AXIS`, with
@@ -73,7 +75,8 @@ class Learner(NamedTuple):
 class Trainer(NamedTuple):
     init: Callable[[jax.Array], TrainState]
     train_chunk: Callable[[TrainState, Any], tuple[TrainState, dict]]
-    collect_chunk: Callable[[TrainState, Any], tuple[TrainState, dict, replay.Transition]]  # + (T, B, ...) steps
+    # + the (T, B, ...) steps and their extras
+    collect_chunk: Callable[[TrainState, Any], tuple[TrainState, dict, replay.Transition, dict]]
     chunk_body: Callable  # collect_chunk unjitted, per device (inside shard_map over AXIS when sharded)
     train: Callable | None  # None when sharded over several devices
     act: Callable[[Any, jax.Array], jax.Array]  # deterministic actor
@@ -138,6 +141,9 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
     actor_opt = optax.adam(dc.actor_lr)
     critic_opt = optax.adam(dc.critic_lr)
     warmup_iterations = tc.warmup_iterations
+    # The region mask rides beside the transitions for teacher rules, never into the replay (it would grow
+    # every row for a signal the learner never reads).
+    emit_regions = bool(getattr(env, "region_names", ()))
     # Envs from index `noisy_envs` on act with the deterministic actor (`noise.quiet_fraction`).
     noisy_envs = tc.num_envs - int(round(dc.noise.quiet_fraction * tc.num_envs))
 
@@ -230,6 +236,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         terminal = done * (1.0 - env_state.info["truncation"])
         transition = replay.Transition(obs, action, env_state.metrics["reward_terms"],
                                        env_state.info["final_obs"], terminal)
+        extras = {"region_mask": env_state.metrics["region_mask"]} if emit_regions else {}
         episode_return = ts.episode_return + env_state.reward
         stats = {
             "episodes": jnp.sum(done),
@@ -244,11 +251,11 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             replay=replay.add(ts.replay, transition),
             episode_return=jnp.where(done > 0, 0.0, episode_return),
         )
-        return ts, stats, transition
+        return ts, stats, (transition, extras)
 
     def _iteration(ts: TrainState, human_params):
         rng, k_noise, k_random, k_update = jax.random.split(ts.rng, 4)
-        ts, stats, transition = _env_step(ts, k_noise, k_random)
+        ts, stats, emitted = _env_step(ts, k_noise, k_random)
         if tc.updates_per_step > 0:
             learn = ts.iteration >= warmup_iterations
             lr, update_stats, n_updates = jax.lax.cond(
@@ -257,11 +264,11 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         else:
             update_stats, n_updates = jnp.zeros((4,)), jnp.float32(0.0)
         stats.update(update_stats=update_stats, updates=n_updates)
-        return _strong(ts.replace(rng=rng, iteration=ts.iteration + 1)), (stats, transition)
+        return _strong(ts.replace(rng=rng, iteration=ts.iteration + 1)), (stats, emitted)
 
     def _collect_chunk(ts: TrainState, human_params):
-        ts, (stats, transitions) = jax.lax.scan(lambda t, _: _iteration(t, human_params), ts, None,
-                                                length=tc.chunk_steps)
+        ts, (stats, (transitions, extras)) = jax.lax.scan(lambda t, _: _iteration(t, human_params), ts, None,
+                                                          length=tc.chunk_steps)
         total = jax.tree.map(lambda x: psum(jnp.sum(x, axis=0)), stats)
         env_steps = tc.chunk_steps * tc.num_envs
         updates = jnp.maximum(total["updates"] / (n_dev if sharded else 1), 1.0)
@@ -281,10 +288,10 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             "q_mean": jnp.where(has_updates, u[2] / updates, nan),
             "sampled_reward": jnp.where(has_updates, u[3] / updates, nan),
         }
-        return ts, metrics, transitions
+        return ts, metrics, transitions, extras
 
     def _chunk(ts: TrainState, human_params):
-        ts, metrics, _ = _collect_chunk(ts, human_params)
+        ts, metrics, _, _ = _collect_chunk(ts, human_params)
         return ts, metrics
 
     def act(actor_params, obs):
@@ -308,8 +315,8 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         donate_argnums=0,
     )
     sharded_collect = jax.jit(
-        jax.shard_map(_collect_chunk, mesh=mesh, in_specs=(specs, P()), out_specs=(specs, P(), P(None, AXIS)),
-                      check_vma=False),
+        jax.shard_map(_collect_chunk, mesh=mesh, in_specs=(specs, P()),
+                      out_specs=(specs, P(), P(None, AXIS), P(None, AXIS)), check_vma=False),
         donate_argnums=0,
     )
     abstract = jax.eval_shape(sharded_init, jax.random.PRNGKey(0))

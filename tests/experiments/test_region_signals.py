@@ -1,0 +1,152 @@
+"""Region signals on the self-touch env: a `region:head` / `region:hip` rule fires exactly on the steps the
+env's region mask says, in the in-jit feedback chunk and in the host teacher of `finetune`, and the mask rides
+beside the chunk's transitions without entering the replay.
+
+One tiny self-touch setup (4 envs, one 100-step chunk) and two compiled chunks (the host loop's and the
+in-jit one). Random actions never reach the head in so few steps, so the actor holds one pose that does: its
+last layer's kernel is zeroed and its bias is the pose (found by holding 512 random poses for 1 s: with this
+one the hip is touched from ~0.1 s and the head from ~0.2 s, mostly at separate times), without noise and with a
+learning rate too small to move it (0 is refused). Every path then steps the same worlds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+from mjx_protamer.config import ConfigError, from_dict
+
+RULE = [{"signal": "region:head", "value": 1.0, "above": 0.5}, {"signal": "region:hip", "value": -1.0, "above": 0.5}]
+# A teacher that speaks on every step it scores (no gap, no silence, no mistakes): its events list the rule's hits.
+TEACHER = {"rule": RULE, "threshold": 0.5, "give_rate": 1.0, "min_gap_steps": 0, "flip_prob": 0.0,
+           "silence_fraction": 0.0}
+RAW = {
+    "pretrain": {
+        "env_name": "self_touch",
+        "env": {"backend": "native"},
+        "ddpg": {"actor_hidden": [16], "critic_hidden": [16, 16], "replay_size": 1000, "batch_size": 16,
+                 "actor_lr": 1e-30, "noise": {"kind": "none"}},
+        "train": {"num_envs": 4, "episode_length": 1000, "total_env_steps": 800, "warmup_env_steps": 0,
+                  "chunk_steps": 100, "seed": 0},
+    },
+    "feedback": {"reward_model": {"hidden": [16]}, "teacher": TEACHER},
+}
+HEAD, HIP = 3, 0  # body.REGIONS order
+POSE = (-0.899, -0.953, -0.389, 0.883, -0.282, 0.914, -0.421, -0.915, -0.155, -0.846, -0.794, -0.116, 0.729, 0.709)
+
+
+def holding_pose(ts):
+    """The train state with an actor that outputs POSE whatever it observes."""
+    last = ts.actor_params["params"]["Dense_1"]
+    held = {"kernel": np.zeros_like(last["kernel"]), "bias": np.arctanh(np.asarray(POSE, np.float32))}
+    params = {"params": {**ts.actor_params["params"], "Dense_1": held}}
+    fresh = lambda: jax.tree.map(jax.numpy.array, params)  # noqa: E731  (own buffers: chunks donate them)
+    return ts.replace(actor_params=fresh(), target_actor_params=fresh())
+
+
+@pytest.fixture(scope="module")
+def runs():
+    from mjx_protamer.envs.body import REGIONS
+    from mjx_protamer.experiments.env_factory import make_env
+    from mjx_protamer.experiments.feedback_train import make_feedback_train
+    from mjx_protamer.experiments.table2 import Table2Config
+    from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
+
+    assert (REGIONS[HEAD], REGIONS[HIP]) == ("head", "hip")
+    cfg = from_dict(Table2Config, RAW)
+    env = make_env(cfg.pretrain)
+    key = jax.random.PRNGKey(cfg.pretrain.train.seed)
+
+    # the host path (`protamer finetune` with a simulated teacher): one chunk of TamerRun
+    run = TamerRun(FeedbackRunConfig(cfg.pretrain, cfg.feedback), env, feedback="simulated:keyboard")
+    run.state = holding_pose(run.state)
+    run.commit_state()
+    _, _, ref_steps, ref_extras = run.trainer.collect_chunk(holding_pose(run.trainer.init(key)), run.model.params)
+    run.step_chunk()
+    host_events = [e for e, _, _ in run.outcomes] + [e for _, _, e in run.teacher._pending]
+
+    # the in-jit path (table2, pretrain --feedback simulated:...): one feedback chunk
+    ft = make_feedback_train(cfg.pretrain, env, cfg.feedback, cfg.batched)
+    ts, fs = holding_pose(ft.trainer.init(key)), ft.init(cfg.pretrain.train.seed)
+    ts, fs, metrics, events = ft.chunk(ts, fs, ft.params("keyboard", cfg.feedback.credit))
+    mask = np.asarray(ref_extras["region_mask"])  # (T, B, 8): what the env said each step touched
+    return dict(cfg=cfg, env=env, mask=mask, ref_obs=np.asarray(ref_steps.obs),
+                ref_terms=np.asarray(ref_steps.reward_terms), run=run, host_events=host_events,
+                ts=ts, metrics=jax.device_get(metrics), events=jax.device_get(events), ft=ft)
+
+
+def test_region_clauses_fire_exactly_where_the_mask_says_in_jit_and_on_the_host(runs):
+    mask = runs["mask"]
+    T, B = mask.shape[:2]
+    assert mask.shape[2] == 8 and set(np.unique(mask)) <= {0.0, 1.0}
+    expected = mask[..., HEAD] - mask[..., HIP]  # the rule by hand: +1 head, -1 hip, 0 both or neither
+    # the worlds must touch the head on some steps and not on others, or the test proves nothing
+    assert 0 < (mask[..., HEAD] > 0).sum() < T * B and (expected != 0).any()
+
+    # host: the watched env's teacher gave feedback on exactly the steps the rule scores, with that score
+    w = runs["cfg"].feedback.watch_env
+    host = {e.details["about_step"]: e.details["score"] for e in runs["host_events"]}
+    # the host loop stepped the same worlds as the reference chunk (all warm-up, same seed)
+    np.testing.assert_array_equal(runs["run"].last_chunk["obs"], runs["ref_obs"][:, w])
+    assert sorted(host) == np.flatnonzero(expected[:, w]).tolist()
+    assert all(host[t] == expected[t, w] for t in host)
+
+    # in jit: the chunk's mean hidden score over every env and step is the hand-computed one, and every event
+    # delivered is about a step the rule scored, with its sign
+    m, ev = runs["metrics"], runs["events"]
+    assert m["score_mean"] == pytest.approx(expected.mean(), abs=1e-6)
+    present = ev["present"]
+    assert present.sum() > 0
+    about, env_i, value = ev["about"][present], ev["env"][present], ev["value"][present]
+    assert (value > 0).any() and (value < 0).any()
+    assert np.array_equal(np.sign(value), expected[about, env_i])
+    # the in-jit teacher of the watched env judged the same steps as the host teacher (some of its deliveries
+    # can be dropped by the pending ring when two land on one arrival step, none invented)
+    assert set(about[env_i == w].tolist()) <= set(host)
+
+
+def test_the_region_mask_rides_beside_the_transitions_not_in_the_replay(runs):
+    from mjx_protamer.agents.ddpg.replay import Transition
+
+    # the mask is of the step each transition reached: the reward's `region` term pays a new region exactly
+    # where the mask gains one over the step before
+    reward = runs["cfg"].pretrain.env.reward
+    assert reward.region_new != reward.region_stale
+    mask = runs["mask"] > 0
+    new = (mask[1:] & ~mask[:-1]).any(-1)
+    region_term = runs["ref_terms"][1:, :, runs["env"].reward_term_names.index("region")]
+    assert new.any() and np.array_equal(region_term == reward.region_new, new)
+
+    replay = runs["ts"].replay.data
+    assert type(replay) is Transition and replay._fields == ("obs", "action", "reward_terms", "next_obs", "terminal")
+    assert all(x.shape[0] == runs["cfg"].pretrain.ddpg.replay_size for x in replay)
+
+
+def test_region_signals_are_a_config_error_where_there_are_no_regions_or_no_such_region(runs):
+    from mjx_protamer.experiments.env_factory import make_env
+    from mjx_protamer.experiments.feedback_train import make_feedback_train
+    from mjx_protamer.experiments.table2 import Table2Config
+    from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
+    from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
+
+    from toy_feedback import toy_feedback_config
+
+    toy_raw = toy_feedback_config()
+    toy_raw["feedback"]["teacher"]["rule"] = [{"signal": "region:head", "value": 1.0, "above": 0.5}]
+    toy = from_dict(Table2Config, toy_raw)
+    toy_env = make_env(toy.pretrain)
+    with pytest.raises(ConfigError, match="'region:head' reads body regions, and this env has none"):
+        make_feedback_train(toy.pretrain, toy_env, toy.feedback)
+    with pytest.raises(ConfigError, match="this env has none"):  # the host teachers check before they run
+        TamerRun(FeedbackRunConfig(toy.pretrain, toy.feedback), toy_env, feedback="simulated:keyboard")
+    with pytest.raises(ConfigError, match="this env has none"):
+        CoachRun(CoachRunConfig(), toy_env, feedback="simulated:keyboard", teacher=toy.feedback.teacher)
+    cfg = runs["cfg"]
+    bad = dataclasses.replace(cfg.feedback, teacher=from_dict(type(cfg.feedback.teacher), {
+        **TEACHER, "rule": [{"signal": "region:foot", "value": 1.0, "above": 0.5}]}))
+    with pytest.raises(ConfigError, match="'region:foot' names no body region; allowed: region:hip, "
+                                          "region:lower_body, region:upper_body, region:head"):
+        make_feedback_train(cfg.pretrain, runs["env"], bad)
