@@ -129,7 +129,7 @@ class AsrConfig:
     # What fills the window after the segment: "silence" = the log-mel of digital silence (Whisper's
     # floor, max - 8 in log10 units), what Whisper saw in training where a short clip was padded with
     # zero samples; "zeros" = zero-valued features (faster-whisper's pad_or_trim), which read as sound
-    # about 4 log10 units above that floor.
+    # well above that floor (4 log10 units for a clip whose loudest bin is at 0).
     pad: Literal["silence", "zeros"] = "silence"
     # Decoding stops after 4 + this many tokens per second of segment (a looping decoder stops early);
     # the rule layer keeps one copy of a repeated phrase.

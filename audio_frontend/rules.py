@@ -163,7 +163,7 @@ class RuleLayer:
         for text, logprob in alternatives:
             if logprob is None or avg_logprob - logprob > self.alternative_margin:
                 continue
-            a = self._decide(text, None)
+            a = self._decide(text, None, logprob)   # the confidence gate holds for alternatives too
             if a.value != 0 and a.rule in KEYWORD_RULES:
                 return RuleDecision(a.value, "alternative", d.words, d.label, float(logprob), alternative=text)
         return d

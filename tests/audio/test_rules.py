@@ -200,6 +200,9 @@ def test_alternatives_never_override_what_the_best_transcript_decides(rules):
     # too unsure to give feedback is not a reason to take another guess
     gated = RuleLayer.from_config(voice_config().sentiment, voice_config("asr.min_avg_logprob=-1.0").asr)
     assert gated.decide("But move.", neutral, -1.3, (("Bad move.", -1.4),)).rule == "low_confidence"
+    # and the gate holds for the alternatives: a sure best transcript does not vouch for an unsure keyword
+    assert gated.decide("But move.", neutral, -0.9, (("Bad move.", -1.2),)).rule == "classifier"
+    assert gated.decide("But move.", neutral, -0.9, (("Bad move.", -0.95),)).rule == "alternative"
 
 
 def test_only_the_keywords_of_an_alternative_count_never_the_classifier(rules):
