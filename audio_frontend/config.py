@@ -115,13 +115,22 @@ class AsrConfig:
     model: str = PACKAGED_WHISPER
     language: str = "en"
     compute_type: str = "int8"
-    beam_size: int = 1
+    # Beam search keeps `num_hypotheses` transcripts (best first): the rule layer may take a keyword from
+    # one of the others (sentiment.alternative_margin). On the dev voices beam 5 heard more right and
+    # fewer wrong signs than greedy at a few ms more decoder time (docs/voice.md).
+    beam_size: int = 5
+    num_hypotheses: int = 5
     max_new_tokens: int = 32
     # faster-whisper: the encoder's input in seconds, the segment padded with silence to this length (a
     # longer segment: its own length), instead of Whisper's fixed 30 s window (null). The encoder's cost
     # grows with its input and a 3.5 s segment in 30 s is mostly padding; much shorter windows make
     # Whisper loop and mishear more (docs/voice.md has the measured speed and accuracy).
     window_s: float | None = 10.0
+    # What fills the window after the segment: "silence" = the log-mel of digital silence (Whisper's
+    # floor, max - 8 in log10 units), what Whisper saw in training where a short clip was padded with
+    # zero samples; "zeros" = zero-valued features (faster-whisper's pad_or_trim), which read as sound
+    # well above that floor (4 log10 units for a clip whose loudest bin is at 0).
+    pad: Literal["silence", "zeros"] = "silence"
     # Decoding stops after 4 + this many tokens per second of segment (a looping decoder stops early);
     # the rule layer keeps one copy of a repeated phrase.
     max_tokens_per_s: float = 8.0
@@ -135,6 +144,7 @@ class AsrConfig:
     def validate(self) -> None:
         check(bool(self.model.strip()), "model", "must name a model")
         check(1 <= self.beam_size <= 10, "beam_size", "must be 1..10")
+        check(1 <= self.num_hypotheses <= self.beam_size, "num_hypotheses", "must be 1..beam_size")
         check(1 <= self.max_new_tokens <= 440, "max_new_tokens", "must be 1..440")
         check(self.window_s is None or 1.0 <= self.window_s <= 30.0, "window_s", "must be within 1..30 s, or null")
         check(self.max_tokens_per_s > 0.0, "max_tokens_per_s", "must be > 0")
@@ -167,6 +177,12 @@ class SentimentConfig:
     # Keywords that open a longer utterance as a discourse marker ("okay, let us see", "right, now the
     # other hand"): alone they are keywords, at the start of a sentence they are not.
     discourse_markers: tuple[str, ...] = ("ok", "okay", "right")
+    # Decoding biased to the keywords: when Whisper's best transcript has words but neither keyword nor
+    # sentiment ("But move."), the first of its other beam hypotheses whose *keywords* decide ("Bad move.")
+    # gives the value, if its mean token log-probability is at most this far below the best's (rule
+    # `alternative`). Only keyword rules may decide there, never the classifier (which read sentiment into
+    # misheard words: "You'll be dead."). null: off.
+    alternative_margin: float | None = 1.0
 
     def validate(self) -> None:
         check(bool(self.model.strip()), "model", "must name a model")
@@ -182,6 +198,8 @@ class SentimentConfig:
         loose = sorted({k.lower() for k in self.discourse_markers} - keywords)
         check(not loose, "discourse_markers", f"{loose} are not keywords (affirmative or negative)")
         check(all(len(k.split()) == 1 for k in self.discourse_markers), "discourse_markers", "must be single words")
+        check(self.alternative_margin is None or 0.0 <= self.alternative_margin <= 10.0, "alternative_margin",
+              "must be within 0..10 (a difference of mean token log-probabilities), or null")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -159,6 +159,8 @@ class Transcript:
     avg_logprob: float | None = None      # mean log-probability per token (Whisper's, length penalty 1)
     no_speech_prob: float | None = None
     timings: dict = field(default_factory=dict)   # seconds: features, encoder, decoder
+    # the beam's other hypotheses, (text, avg_logprob), best first
+    alternatives: tuple[tuple[str, float], ...] = ()
 
 
 def transcript_of(transcriber, audio) -> Transcript:
@@ -169,9 +171,31 @@ def transcript_of(transcriber, audio) -> Transcript:
     return Transcript(transcriber.transcribe(audio))
 
 
+# Whisper's log-mel: log10 of the mel power, floored at 1e-10 and at 8 below the loudest bin, then
+# mapped by (x + 4) / 4. A zero sample therefore reads as max((-10 + 4) / 4, loudest - 2).
+_LOG10_FLOOR_FEATURE = (-10.0 + 4.0) / 4.0
+_DYNAMIC_RANGE_FEATURE = 8.0 / 4.0
+
+
+def pad_features(feats: np.ndarray, frames: int, pad: str = "silence") -> np.ndarray:
+    """Whisper log-mel features (n_mels, t) cut or padded to `frames`.
+
+    "silence": padded with the value digital silence has in this clip's normalisation, what Whisper's
+    own `log_mel_spectrogram(audio, padding=N_SAMPLES)` gives after the clip; "zeros": zero features,
+    as faster-whisper's `pad_or_trim` (a level well above silence)."""
+    t = feats.shape[1]
+    if t >= frames:
+        return feats[:, :frames]
+    fill = 0.0
+    if pad == "silence":
+        fill = max(_LOG10_FLOOR_FEATURE, float(feats.max()) - _DYNAMIC_RANGE_FEATURE) if t else _LOG10_FLOOR_FEATURE
+    return np.pad(feats, ((0, 0), (0, frames - t)), constant_values=fill)
+
+
 class FasterWhisperTranscriber:
     """Whisper in CTranslate2 on CPU (the default model is the packaged tiny.en), called one segment at a
-    time: log-mel features, one encoder pass, one greedy (or beam) decode without timestamps.
+    time: log-mel features, one encoder pass, one beam (or greedy) decode without timestamps that keeps
+    `asr.num_hypotheses` transcripts.
 
     faster-whisper's `transcribe` would pad every segment to Whisper's 30 s window; here the encoder sees
     the segment padded to `asr.window_s` (CTranslate2 accepts a shorter mel), which is what makes a 3 s
@@ -235,23 +259,25 @@ class FasterWhisperTranscriber:
         feats = self.model.feature_extractor(x, padding=160)
         content = feats.shape[1] - 1                # faster-whisper drops the frame of the padding too
         n = self.frames_for(content)
-        feats = feats[:, :n] if content >= n else np.pad(feats[:, :content], ((0, 0), (0, n - content)))
+        feats = pad_features(feats[:, :content], n, self.cfg.pad)
         t1 = time.perf_counter()
         enc = self.model.model.encode(ctranslate2.StorageView.from_array(np.ascontiguousarray(feats[None])))
         t2 = time.perf_counter()
         r = self.model.model.generate(
             enc, [self.prompt], beam_size=self.cfg.beam_size,
+            num_hypotheses=min(self.cfg.num_hypotheses, self.cfg.beam_size),
             max_length=len(self.prompt) + self.max_new_tokens(x.size / self.model.feature_extractor.sampling_rate),
             return_scores=True, return_no_speech_prob=True, suppress_blank=True,
             suppress_tokens=self.suppress_tokens)[0]
         t3 = time.perf_counter()
-        tokens = r.sequences_ids[0]
         # CTranslate2's score is the cumulative log-probability / length (penalty 1); faster-whisper's mean
         # counts the end-of-text token too
-        avg = float(r.scores[0]) * len(tokens) / (len(tokens) + 1) if r.scores else None
-        return Transcript(self.tokenizer.decode(tokens).strip(), avg, float(r.no_speech_prob),
+        hyps = [(self.tokenizer.decode(tokens).strip(),
+                 float(score) * len(tokens) / (len(tokens) + 1) if score is not None else None)
+                for tokens, score in zip(r.sequences_ids, list(r.scores) or [None] * len(r.sequences_ids))]
+        return Transcript(hyps[0][0], hyps[0][1], float(r.no_speech_prob),
                           {"features_s": t1 - t0, "encoder_s": t2 - t1, "decoder_s": t3 - t2,
-                           "encoder_frames": n})
+                           "encoder_frames": n}, tuple(hyps[1:]))
 
     def transcribe(self, audio) -> str:
         return self.transcribe_scored(audio).text

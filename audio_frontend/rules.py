@@ -57,11 +57,16 @@ def is_negator(word: str) -> bool:
 class RuleDecision:
     value: float          # +1, -1 or 0
     # "keyword", "keyword_vote", "negated_negative", "prohibitive", "filler", "empty", "low_confidence",
-    # "classifier", "no_classifier"
+    # "classifier", "no_classifier", "alternative"
     rule: str
     words: tuple[str, ...]
     label: str | None = None
     score: float | None = None
+    alternative: str | None = None   # rule "alternative": the beam hypothesis whose keywords decided
+
+
+# The rules by which keywords alone decide: what an alternative hypothesis may decide by.
+KEYWORD_RULES = frozenset({"keyword", "keyword_vote", "prohibitive"})
 
 
 # A classifier that can say "neither" (VADER below its threshold) gives no feedback for that text.
@@ -70,7 +75,8 @@ NEUTRAL_LABEL = "NEUTRAL"
 
 class RuleLayer:
     def __init__(self, affirmative, negative, fillers, positive_labels=("POSITIVE",), negative_labels=("NEGATIVE",),
-                 discourse_markers=(), min_avg_logprob: float | None = None):
+                 discourse_markers=(), min_avg_logprob: float | None = None,
+                 alternative_margin: float | None = None):
         self.affirmative = {" ".join(words_of(k)) for k in affirmative}
         self.negative = {" ".join(words_of(k)) for k in negative}
         self.fillers = {" ".join(words_of(k)) for k in fillers}
@@ -78,6 +84,7 @@ class RuleLayer:
         self.positive_labels = {lab.lower() for lab in positive_labels}
         self.negative_labels = {lab.lower() for lab in negative_labels}
         self.min_avg_logprob = min_avg_logprob
+        self.alternative_margin = alternative_margin
         self._phrases = sorted([(tuple(k.split()), 1.0) for k in self.affirmative if k]
                                + [(tuple(k.split()), -1.0) for k in self.negative if k], key=lambda t: -len(t[0]))
 
@@ -85,7 +92,7 @@ class RuleLayer:
     def from_config(cls, cfg, asr_cfg=None) -> "RuleLayer":
         """`cfg`: the `sentiment` section; `asr_cfg` (optional): the `asr` section, for the confidence gate."""
         return cls(cfg.affirmative, cfg.negative, cfg.fillers, cfg.positive_labels, cfg.negative_labels,
-                   cfg.discourse_markers, getattr(asr_cfg, "min_avg_logprob", None))
+                   cfg.discourse_markers, getattr(asr_cfg, "min_avg_logprob", None), cfg.alternative_margin)
 
     def keyword_value(self, content: list[str]) -> float | None:
         phrase = " ".join(content)
@@ -142,9 +149,26 @@ class RuleLayer:
                          f"set sentiment.positive_labels / negative_labels")
 
     def decide(self, transcript: str, classify: Callable[[str], tuple[str, float]] | None,
-               avg_logprob: float | None = None) -> RuleDecision:
+               avg_logprob: float | None = None,
+               alternatives: tuple[tuple[str, float | None], ...] = ()) -> RuleDecision:
         """`avg_logprob`: the recogniser's mean token log-probability, when it gives one; below
-        `min_avg_logprob` the transcript is too unsure to give feedback."""
+        `min_avg_logprob` the transcript is too unsure to give feedback. `alternatives`: the recogniser's
+        other hypotheses `(text, avg_logprob)`; when the transcript has words but nothing decides (the
+        classifier says neutral), the first of them within `alternative_margin` of `avg_logprob` whose
+        keywords decide gives the value (rule "alternative"). A keyword the recogniser found nearly as
+        likely is kept; the classifier is never asked about an alternative."""
+        d = self._decide(transcript, classify, avg_logprob)
+        if (d.value != 0 or d.rule != "classifier" or self.alternative_margin is None or avg_logprob is None):
+            return d
+        for text, logprob in alternatives:
+            if logprob is None or avg_logprob - logprob > self.alternative_margin:
+                continue
+            a = self._decide(text, None, logprob)   # the confidence gate holds for alternatives too
+            if a.value != 0 and a.rule in KEYWORD_RULES:
+                return RuleDecision(a.value, "alternative", d.words, d.label, float(logprob), alternative=text)
+        return d
+
+    def _decide(self, transcript: str, classify, avg_logprob: float | None = None) -> RuleDecision:
         words = collapse_repeats(words_of(transcript))
         if not words:
             return RuleDecision(0.0, "empty", ())

@@ -146,9 +146,11 @@ class WhisperScorer:
         t0 = time.perf_counter()
         tr = transcript_of(self.transcriber, np.asarray(audio, dtype=np.float32))
         t1 = time.perf_counter()
-        d = self.rules.decide(tr.text, self.classify if self.classifier is not None else None, tr.avg_logprob)
+        d = self.rules.decide(tr.text, self.classify if self.classifier is not None else None, tr.avg_logprob,
+                              tr.alternatives)
         t2 = time.perf_counter()
-        return d.value, {"transcript": tr.text, "rule": d.rule, "label": d.label, "label_score": d.score,
+        return d.value, {"transcript": tr.text, "rule": d.rule, "alternative": d.alternative,
+                         "label": d.label, "label_score": d.score,
                          "avg_logprob": tr.avg_logprob, "no_speech_prob": tr.no_speech_prob,
                          "sentiment": self.sentiment_name, "asr_model": self.cfg.asr.model,
                          "asr_backend": self.cfg.asr.backend, "asr_s": t1 - t0, **tr.timings,

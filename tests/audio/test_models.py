@@ -151,3 +151,31 @@ def test_packaged_whisper_encodes_a_short_window_not_30_s(packaged_whisper, spee
         assert "good job" in " ".join(words_of(other.text)), (window, other)
     # decoding stops after 4 + max_tokens_per_s tokens per second: a looping decoder cannot run to 32
     assert packaged_whisper.max_new_tokens(0.5) == 8 and packaged_whisper.max_new_tokens(10.0) == 32
+    # the beam's other hypotheses come with their scores, for the rule layer
+    assert packaged_whisper.cfg.num_hypotheses == 5 and len(tr.alternatives) == 4, tr
+    assert all(isinstance(t, str) and -10.0 < lp < 0.0 for t, lp in tr.alternatives), tr.alternatives
+    assert len({t for t, _ in tr.alternatives} | {tr.text}) == 5
+    greedy = FasterWhisperTranscriber(voice_config("asr.beam_size=1", "asr.num_hypotheses=1").asr)
+    assert greedy.transcribe_scored(x).alternatives == ()
+
+
+def test_the_window_is_padded_with_the_log_mel_of_silence():
+    """What fills the encoder window after a segment is what Whisper's own front end gives for zero
+    samples after the clip (and saw in training), not zero features, which read as sound."""
+    pytest.importorskip("faster_whisper")
+    from faster_whisper.feature_extractor import FeatureExtractor
+
+    from audio_frontend.models import pad_features
+
+    fe = FeatureExtractor()
+    x = np.sin(2 * np.pi * 300 * np.arange(int(0.8 * SR)) / SR).astype(np.float32) * 0.3
+    seg = fe(x, padding=160)[:, :-1]
+    n = 300
+    padded = pad_features(seg, n, "silence")
+    whisper_own = fe(np.pad(x, (0, n * 160)), padding=160)[:, :n]
+    assert padded.shape == (80, n) and np.array_equal(padded[:, :seg.shape[1]], seg)
+    tail = slice(seg.shape[1] + 2, n)               # past the STFT frames that straddle the clip's end
+    np.testing.assert_allclose(padded[:, tail], whisper_own[:, tail], atol=1e-5)
+    assert whisper_own[:, tail].max() < seg.max() - 1.9   # silence: 8 log10 units (2 here) below the peak
+    assert np.all(pad_features(seg, n, "zeros")[:, seg.shape[1]:] == 0.0)
+    assert np.array_equal(pad_features(seg, 20, "silence"), seg[:, :20])   # a longer segment is cut, not padded

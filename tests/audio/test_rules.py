@@ -88,6 +88,12 @@ def test_config_validation_names_the_field():
         voice_config("asr.window_s=0.5")
     with pytest.raises(ConfigError, match="asr.min_avg_logprob"):
         voice_config("asr.min_avg_logprob=0.5")
+    with pytest.raises(ConfigError, match="asr.num_hypotheses.*beam_size"):
+        voice_config("asr.beam_size=2", "asr.num_hypotheses=3")
+    with pytest.raises(ConfigError, match="asr.pad"):
+        voice_config("asr.pad=noise")
+    with pytest.raises(ConfigError, match="sentiment.alternative_margin"):
+        voice_config("sentiment.alternative_margin=-0.5")
 
 
 @pytest.mark.parametrize("text,value,rule", [
@@ -160,3 +166,56 @@ def test_low_confidence_transcripts_give_no_feedback():
     # off by default
     assert RuleLayer.from_config(voice_config().sentiment, voice_config().asr).decide(
         "Good job.", never, avg_logprob=-5.0).value == 1
+
+
+def neutral(text):
+    return "NEUTRAL", 0.0
+
+
+def test_a_keyword_among_the_other_hypotheses_decides_a_transcript_without_sentiment(rules):
+    """Whisper heard "But move." best and "Bad move." nearly as likely (the dev voices' most common miss):
+    the keyword of an alternative within alternative_margin (1.0) of the best decides."""
+    alts = (("But move!", -1.09), ("Bad move.", -1.25), ("Good move.", -1.3))
+    d = rules.decide("But move.", neutral, -0.65, alts)
+    assert (d.value, d.rule, d.alternative, d.score) == (-1, "alternative", "Bad move.", -1.25)
+    assert d.words == ("but", "move")                     # what was heard best stays the transcript
+    # beyond the margin: no feedback
+    d = rules.decide("But move.", neutral, -0.1, alts)
+    assert (d.value, d.rule, d.alternative) == (0, "classifier", None)
+    # off, or a backend without scores
+    off = RuleLayer.from_config(voice_config("sentiment.alternative_margin=null").sentiment)
+    assert off.decide("But move.", neutral, -0.65, alts).rule == "classifier"
+    assert rules.decide("But move.", neutral, None, alts).rule == "classifier"
+    assert rules.decide("But move.", neutral, -0.65, (("Bad move.", None),)).rule == "classifier"
+
+
+def test_alternatives_never_override_what_the_best_transcript_decides(rules):
+    alts = (("No.", -0.5), ("Good job.", -0.5))
+    # a keyword, a filler, an empty transcript, a classifier's sign and a negated negative stand
+    assert rules.decide("Yes.", never, -0.4, alts).value == 1
+    assert (rules.decide("Um...", never, -0.4, alts).rule, rules.decide("", never, -0.4, alts).rule) == (
+        "filler", "empty")
+    assert rules.decide("I love it", lambda t: ("POSITIVE", 0.9), -0.4, alts).value == 1
+    assert rules.decide("Not really bad.", never, -0.4, alts).rule == "negated_negative"
+    # too unsure to give feedback is not a reason to take another guess
+    gated = RuleLayer.from_config(voice_config().sentiment, voice_config("asr.min_avg_logprob=-1.0").asr)
+    assert gated.decide("But move.", neutral, -1.3, (("Bad move.", -1.4),)).rule == "low_confidence"
+    # and the gate holds for the alternatives: a sure best transcript does not vouch for an unsure keyword
+    assert gated.decide("But move.", neutral, -0.9, (("Bad move.", -1.2),)).rule == "classifier"
+    assert gated.decide("But move.", neutral, -0.9, (("Bad move.", -0.95),)).rule == "alternative"
+
+
+def test_only_the_keywords_of_an_alternative_count_never_the_classifier(rules):
+    """A classifier reads sentiment into misheard words ("you did it" heard as "You'll be dead."): an
+    alternative the rules cannot decide by keywords is passed over, and so is one that decides 0."""
+    seen = []
+
+    def classify(text):
+        seen.append(text)
+        return ("NEGATIVE", 0.7) if "dead" in text else ("NEUTRAL", 0.0)
+    alts = (("You'll be dead.", -1.26), ("Not bad.", -1.3), ("Uh, no.", -1.4), ("Don't do that.", -1.5))
+    d = rules.decide("You'll be deep.", classify, -1.07, alts)
+    assert (d.value, d.rule, d.alternative) == (-1, "alternative", "Uh, no.")
+    assert seen == ["you'll be deep"]                    # the classifier saw the best transcript only
+    d = rules.decide("You'll be deep.", classify, -1.07, alts[:2])
+    assert (d.value, d.rule) == (0, "classifier")
