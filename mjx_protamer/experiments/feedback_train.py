@@ -50,7 +50,8 @@ from flax import struct
 from jax.sharding import PartitionSpec as P
 
 from mjx_protamer.config import ConfigError, check
-from mjx_protamer.human.batched import FeedbackRing, draw_credited_steps, reward_model_updates, ring_add, ring_init
+from mjx_protamer.human.batched import (FeedbackRing, draw_credited_steps, draw_silent_steps, reward_model_updates,
+                                        ring_add, ring_init)
 from mjx_protamer.human.credit import CreditConfig, lag_weights
 from mjx_protamer.human.reward_model import RewardMLP, reward_fn
 from mjx_protamer.human.teachers import (BatchedTeacherState, TeacherConfig, batched_teacher, batched_teacher_init,
@@ -70,6 +71,9 @@ class BatchedFeedbackConfig:
     # minibatches on the chunk's newly credited rows; -1 = updates_per_feedback x ceil(max events / 3), about one
     # per event given (Deep TAMER updates on every feedback)
     fresh_updates_per_chunk: int = -1
+    # steps the teacher watched in silence (labelled 0, each weighing `credit.silence_weight` events) are
+    # represented by this many rows a chunk (per device), drawn uniformly among them; 0: events alone
+    silence_rows_per_chunk: int = 0
 
     def validate(self) -> None:
         check(self.teach_envs >= 0, "teach_envs", f"must be >= 0, got {self.teach_envs}")
@@ -77,6 +81,8 @@ class BatchedFeedbackConfig:
         check(self.rows_per_event >= 1, "rows_per_event", f"must be >= 1, got {self.rows_per_event}")
         check(self.fresh_updates_per_chunk >= -1, "fresh_updates_per_chunk",
               f"must be >= -1, got {self.fresh_updates_per_chunk}")
+        check(self.silence_rows_per_chunk >= 0, "silence_rows_per_chunk",
+              f"must be >= 0, got {self.silence_rows_per_chunk}")
         check(self.replay_updates_per_chunk >= -1, "replay_updates_per_chunk",
               f"must be >= -1, got {self.replay_updates_per_chunk}")
 
@@ -97,6 +103,7 @@ class FeedbackParams(NamedTuple):
     teach: jax.Array  # float 1/0: the teacher speaks
     gain: jax.Array  # float: multiplies r_hat in the DDPG reward (0 = DDPG alone)
     lag_w: jax.Array  # (L,) credit weight of lag j from the arrival step
+    silence_w: jax.Array  # float: weight of a silent step's 0 label, in events (0: events alone)
 
 
 class CreditHistory(NamedTuple):
@@ -104,6 +111,7 @@ class CreditHistory(NamedTuple):
     chunk's first step read. H = the longest compiled credit window less one (`FeedbackTrainer.history_len`)."""
     obs: jax.Array  # (H, B, obs)
     action: jax.Array  # (H, B, act)
+    arrived: jax.Array  # (H, B) bool: feedback reached the learner at that step (for the silent steps)
 
 
 @struct.dataclass
@@ -163,6 +171,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     K = batched.rows_per_event
     n_replay = (T // rmc.replay_every if rmc.replay_every else 0) if batched.replay_updates_per_chunk < 0 \
         else batched.replay_updates_per_chunk
+    S = batched.silence_rows_per_chunk
     n_fresh = rmc.updates_per_feedback * -(-E // 3) if batched.fresh_updates_per_chunk < 0 \
         else batched.fresh_updates_per_chunk
 
@@ -175,7 +184,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
             w[:len(lw)] = lw
         return FeedbackParams(kind=jnp.int32(KINDS.index(kind) if kind else 0),
                               teach=jnp.float32(kind is not None), gain=jnp.float32(kind is not None),
-                              lag_w=jnp.asarray(w))
+                              lag_w=jnp.asarray(w),
+                              silence_w=jnp.float32(credit.silence_weight if kind is not None else 0.0))
 
     def init(seed) -> FeedbackState:
         key = jax.random.fold_in(jax.random.PRNGKey(seed), 0x7A3E)
@@ -184,7 +194,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         return FeedbackState(
             teacher=batched_teacher_init(kind_cfgs, B, dt), rm_params=p, rm_opt_state=opt.init(p),
             ring=ring_init(rmc.buffer_size, obs_size, act_size), rng=k_run, totals=jnp.zeros((5,)),
-            history=CreditHistory(jnp.zeros((H, B, obs_size)), jnp.zeros((H, B, act_size))))
+            history=CreditHistory(jnp.zeros((H, B, obs_size)), jnp.zeros((H, B, act_size)), jnp.zeros((H, B), bool)))
 
     # Per-env work runs on each device's envs; these join the devices where the replicated parts need all.
     def local_key(key):
@@ -218,6 +228,17 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         c_act = seen_act[H + rel, b_idx[:, None]].reshape(E * K, act_size)
         w = ok.astype(jnp.float32).reshape(-1)
         h = target.reshape(-1)
+        seen_arrived = jnp.concatenate([fs.history.arrived, valid])
+        if S:  # silent steps, labelled 0 (their own key: the event draws are the same with and without)
+            k_silent = jax.random.fold_in(local_key(k_lag), 1)
+            s_rel, s_b, s_ok, n_silent = draw_silent_steps(seen_arrived, active, fp.lag_w, k_silent, H, S)
+            s_ok = s_ok & (it0 + s_rel >= 0)
+            # a silent step weighs silence_w events; an event's K rows weigh 1 each, a row stands for n_silent / S
+            s_w = s_ok * fp.silence_w * K * n_silent / S
+            c_obs = jnp.concatenate([c_obs, seen_obs[H + s_rel, s_b]])
+            c_act = jnp.concatenate([c_act, seen_act[H + s_rel, s_b]])
+            w = jnp.concatenate([w, s_w])  # rows of weight 0 never enter the ring
+            h = jnp.concatenate([h, jnp.zeros((S,))])
         c_obs, c_act, w, h = gather(c_obs), gather(c_act), gather(w), gather(h)
         ring = ring_add(fs.ring, c_obs, c_act, w, h)
         p, o, losses, live = reward_model_updates(apply, opt, fs.rm_params, fs.rm_opt_state, ring,
@@ -232,7 +253,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         rc, scc = rh - rh.mean(), sc - sc.mean()
         corr = jnp.sum(rc * scc) / jnp.maximum(jnp.sqrt(jnp.sum(rc ** 2) * jnp.sum(scc ** 2)), 1e-12)
         used = psum(jnp.minimum(n_events, E))
-        credited = jnp.sum(w)
+        credited = psum(jnp.sum(ok))
         pos = psum(jnp.sum(valid & (value > 0)))
         neg = psum(jnp.sum(valid & (value < 0)))
         n_all = psum(n_events)
@@ -251,7 +272,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         present = jnp.arange(E) < n_events
         events = {"present": present, "arrival": it0 + t_idx,
                   "env": env_ids[b_idx], "value": value[t_idx, b_idx], "about": about[t_idx, b_idx]}
-        history = CreditHistory(seen_obs[-H:], seen_act[-H:])
+        history = CreditHistory(seen_obs[-H:], seen_act[-H:], seen_arrived[-H:])
         fs = fs.replace(teacher=teacher, rm_params=p, rm_opt_state=o, ring=ring, rng=rng, totals=totals,
                         history=history)
         return ts, fs, metrics, events
@@ -261,7 +282,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         fs_specs = FeedbackState(
             teacher=BatchedTeacherState(teacher=split, pending_value=split, pending_valid=split,
                                         pending_about=split, step=P()),
-            rm_params=P(), rm_opt_state=P(), ring=P(), rng=P(), totals=P(), history=P(None, AXIS))
+            rm_params=P(), rm_opt_state=P(), ring=P(), rng=P(), totals=P(),
+            history=CreditHistory(P(None, AXIS), P(None, AXIS), P(None, AXIS)))
         chunk_fn = jax.shard_map(chunk, mesh=trainer.mesh, in_specs=(trainer.state_specs, fs_specs, P()),
                                  out_specs=(trainer.state_specs, fs_specs, P(), split), check_vma=False)
     else:

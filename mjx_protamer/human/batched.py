@@ -40,6 +40,36 @@ def draw_credited_steps(value, valid, lag_w, key, max_events: int, rows_per_even
     return t_idx[:, None] - lags, b_idx, ok, target, n_events
 
 
+def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int):
+    """Steps no feedback was about: the teacher watched and stayed silent through the step's whole credit window.
+
+    `arrived` (H + T, B) bool: feedback reached the learner at that step (the carried history, then the chunk);
+    `active` (B,) the env has a teacher; `lag_w` (L,) the credit weight of lag j. A step at row p can be
+    credited by arrivals at rows p + j for the lags j with weight; it is silent when none arrived there. Only
+    the T steps whose window closes inside this chunk are judged, so each step is judged once over a run.
+    Draws `n_rows` of them uniformly (with replacement). Returns (rel (n,) the step relative to the chunk's
+    first step, negative: an earlier chunk; env (n,); ok (n,) there was a silent step to draw; n_silent, how
+    many there were: a row stands for n_silent / n_rows of them).
+
+    Why (Loftin et al. 2014, "Learning something from nothing"): a teacher who praises right-hand touches and
+    scolds left-hand ones says nothing about the states in between, so a model fitted to events alone never
+    sees a 0 and rates everything near the common +1 (measured, docs/experiments.md).
+    """
+    HT, B = arrived.shape
+    T = HT - history_len
+    L = lag_w.shape[0]
+    has = lag_w > 0
+    first = jnp.argmax(has)
+    last = L - 1 - jnp.argmax(has[::-1])
+    counts = jnp.concatenate([jnp.zeros((1, B), jnp.int32), jnp.cumsum(arrived.astype(jnp.int32), axis=0)])
+    p = history_len - last + jnp.arange(T)  # rows whose window's last lag lands in this chunk
+    n_arrived = counts[p + last + 1] - counts[p + first]  # arrivals at rows p + first .. p + last
+    silent = (n_arrived == 0) & active[None, :] & jnp.any(has)
+    idx = jax.random.categorical(key, jnp.where(silent.reshape(-1), 0.0, -1e30), shape=(n_rows,))
+    ok = jnp.broadcast_to(jnp.any(silent), (n_rows,))
+    return p[idx // B] - history_len, idx % B, ok, jnp.sum(silent)
+
+
 def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRing", fresh_rows, key,
                          n_fresh: int, n_replay: int, batch_size: int, replay_min_rows: int):
     """`n_fresh` minibatch steps on the newly credited rows (drawn among those with weight > 0: Deep TAMER

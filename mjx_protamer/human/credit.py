@@ -45,6 +45,10 @@ class CreditConfig:
     delay_min_s: float = 0.2  # time_window: human delay ~ Uniform[delay_min_s, delay_max_s]
     delay_max_s: float = 4.0
     min_interval_steps: int = 5  # at most one accepted event per this many steps
+    # a step the teacher watched and said nothing about (no event arrived in its credit window) is a row with
+    # target 0 weighing this many events (an event's credit weights sum to 1); 0: events alone, as Deep TAMER.
+    # Why: docs/experiments.md, "What the reward model learns from silence".
+    silence_weight: float = 0.0
 
     def validate(self) -> None:
         check(self.window_steps >= 1, "window_steps", f"must be >= 1, got {self.window_steps}")
@@ -52,6 +56,7 @@ class CreditConfig:
         check(self.delay_min_s >= 0.0, "delay_min_s", f"must be >= 0, got {self.delay_min_s}")
         check(self.delay_max_s > self.delay_min_s, "delay_max_s",
               f"must be > delay_min_s ({self.delay_min_s}), got {self.delay_max_s}")
+        check(self.silence_weight >= 0, "silence_weight", f"must be >= 0, got {self.silence_weight}")
         check(self.min_interval_steps >= 0, "min_interval_steps", f"must be >= 0, got {self.min_interval_steps}")
 
 

@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from mjx_protamer.human.batched import draw_credited_steps, reward_model_updates, ring_add, ring_init
+from mjx_protamer.human.batched import (draw_credited_steps, draw_silent_steps, reward_model_updates, ring_add,
+                                        ring_init)
 from mjx_protamer.human.channels import ChannelConfig
 from mjx_protamer.human.clock import StepClock
 from mjx_protamer.human.credit import CreditAssigner, CreditConfig, lag_weights
@@ -47,6 +48,26 @@ def test_credited_steps_follow_the_lag_weights():
     assert (target[0] == -1).all() and (target[1] == 0.5).all()
     none = draw_credited_steps(value, valid, jnp.zeros(4), jax.random.PRNGKey(0), 3, 4)[2]
     assert not np.asarray(none).any()  # no credit weight (DDPG alone): nothing credited
+
+
+def test_silent_steps_are_those_no_arrival_could_credit():
+    """A step is silent when no feedback arrived at any lag with credit weight after it; each chunk judges the T
+    steps whose window closes inside it, and envs without a teacher are never silent."""
+    H, T, B = 3, 4, 2
+    lag_w = jnp.array([0.0, 0.5, 0.5, 0.0])  # an arrival credits the steps 1 and 2 before it
+    arrived = jnp.zeros((H + T, B), bool).at[4, 0].set(True).at[5, 1].set(True)
+    active = jnp.array([True, False])
+    rel, env, ok, n = jax.jit(lambda k: draw_silent_steps(arrived, active, lag_w, k, H, 2000))(jax.random.PRNGKey(0))
+    rel, env, ok = (np.asarray(x) for x in (rel, env, ok))
+    assert int(n) == 2
+    # judged rows p = 1..4 (their last lag, p + 2, lands in the chunk's rows 3..6); the arrival at row 4 credits
+    # rows 2 and 3; rows 1 and 4 (chunk steps -2 and 1) heard nothing; env 1 has no teacher
+    assert ok.all() and set(env.tolist()) == {0}
+    assert set(rel.tolist()) == {-2, 1} and abs((rel == 1).mean() - 0.5) < 0.05
+    everywhere = jnp.zeros((H + T, B), bool).at[2:, 0].set(True)
+    assert not np.asarray(draw_silent_steps(everywhere, active, lag_w, jax.random.PRNGKey(0), H, 8)[2]).any()
+    none = draw_silent_steps(arrived, active, jnp.zeros(4), jax.random.PRNGKey(0), H, 8)[2]
+    assert not np.asarray(none).any()  # no credit weight (DDPG alone): no teacher to be silent
 
 
 def test_ring_keeps_only_weighted_rows_and_wraps():
