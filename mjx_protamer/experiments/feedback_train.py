@@ -73,7 +73,7 @@ class BatchedFeedbackConfig:
     fresh_updates_per_chunk: int = -1
     # steps the teacher watched in silence (labelled 0, each weighing `credit.silence_weight` events) are
     # represented by this many rows a chunk (per device), drawn uniformly among them; 0: events alone
-    silence_rows_per_chunk: int = 0
+    silence_rows_per_chunk: int = 1024
 
     def validate(self) -> None:
         check(self.teach_envs >= 0, "teach_envs", f"must be >= 0, got {self.teach_envs}")
@@ -172,6 +172,9 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     n_replay = (T // rmc.replay_every if rmc.replay_every else 0) if batched.replay_updates_per_chunk < 0 \
         else batched.replay_updates_per_chunk
     S = batched.silence_rows_per_chunk
+    if fc.credit.silence_weight > 0 and S == 0:
+        raise ConfigError("config field 'batched.silence_rows_per_chunk': 0 draws no silent step, and "
+                          f"feedback.credit.silence_weight is {fc.credit.silence_weight}; set rows > 0 or the weight 0")
     n_fresh = rmc.updates_per_feedback * -(-E // 3) if batched.fresh_updates_per_chunk < 0 \
         else batched.fresh_updates_per_chunk
 
@@ -322,7 +325,7 @@ def default_feedback_config(kind: str):
     from mjx_protamer.human.tamer_loop import FeedbackConfig
 
     base = FeedbackConfig()
-    return dataclasses.replace(base, credit=dataclasses.replace(base.credit, scheme="channel"),
+    return dataclasses.replace(base, credit=dataclasses.replace(base.credit, scheme="channel", silence_weight=0.03),
                                teacher=with_channel(base.teacher, kind))
 
 

@@ -135,14 +135,26 @@ class CreditAssigner:
         return Credit(event, step, tuple(p[0] for p in pairs), tuple(p[1] for p in pairs)), None
 
 
+def silence_reach_s(config: CreditConfig, dt: float, channel: ChannelConfig | None = None) -> float:
+    """Seconds after a step ends by which every event that could credit it has reached the learner: after
+    that, a step no event credited was watched in silence (`StepHistory.silent_samples`)."""
+    if config.scheme == "channel":
+        return delay_quantile_span(channel)[1] + channel.arrival_offset_s
+    if config.scheme == "step_window":
+        return config.window_steps * dt
+    return config.delay_max_s
+
+
 class StepHistory:
-    """The (obs, action) of the last `capacity` steps of the watched env, by global step (host NumPy)."""
+    """The (obs, action) of the last `capacity` steps of the watched env, by global step (host NumPy), and
+    whether a credit has read each of them."""
 
     def __init__(self, capacity: int, obs_size: int, action_size: int):
         self.capacity = capacity
         self.obs = np.zeros((capacity, obs_size), np.float32)
         self.action = np.zeros((capacity, action_size), np.float32)
         self.step = np.full((capacity,), -1, np.int64)
+        self.credited = np.zeros((capacity,), bool)
 
     def record(self, first_step: int, obs: np.ndarray, action: np.ndarray) -> None:
         n = len(obs)
@@ -150,6 +162,7 @@ class StepHistory:
         self.obs[idx] = obs
         self.action[idx] = action
         self.step[idx] = first_step + np.arange(n)
+        self.credited[idx] = False
 
     def samples(self, credit: Credit) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(obs, action, weight, target) rows for a credit; steps no longer remembered are skipped."""
@@ -157,9 +170,20 @@ class StepHistory:
         idx = steps % self.capacity
         ok = self.step[idx] == steps
         idx = idx[ok]
+        self.credited[idx] = True
         w = np.asarray(credit.weights, np.float32)[ok]
         h = np.full(len(idx), credit.event.value, np.float32)
         return self.obs[idx], self.action[idx], w, h
+
+    def silent_samples(self, first: int, last: int, weight: float):
+        """(obs, action, weight, target 0) rows for the remembered steps first..last that no credit read: the
+        teacher watched them and said nothing (the host twin of `batched.draw_silent_steps`; call it once a
+        step's `silence_reach_s` has passed)."""
+        steps = np.arange(first, last + 1, dtype=np.int64)
+        idx = steps % self.capacity
+        idx = idx[(self.step[idx] == steps) & ~self.credited[idx]]
+        n = len(idx)
+        return self.obs[idx], self.action[idx], np.full(n, weight, np.float32), np.zeros(n, np.float32)
 
 
 def lag_weights(config: CreditConfig, dt: float, channel: ChannelConfig | None = None) -> np.ndarray:

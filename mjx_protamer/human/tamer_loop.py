@@ -29,7 +29,7 @@ import numpy as np
 from mjx_protamer.agents.ddpg.config import PretrainConfig
 from mjx_protamer.config import check
 from mjx_protamer.human.clock import StepClock, VirtualClock
-from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory
+from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory, silence_reach_s
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
 from mjx_protamer.human.reward_model import RewardModel, RewardModelConfig
 from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, env_signal_columns, rule_signals, with_channel
@@ -104,6 +104,8 @@ class TamerRun:
         self.step_clock = StepClock(fc.dt, capacity=history)
         self.history = StepHistory(history, env.observation_size, env.action_size)
         self.assigner = CreditAssigner(fc.credit, self.step_clock, fc.teacher.channel)
+        self.silence_reach = silence_reach_s(fc.credit, fc.dt, fc.teacher.channel)
+        self.silent_next = 0  # the first step not yet judged silent or credited
         self.teacher = None
         if self.simulated:
             kind = feedback.split(":", 1)[1] if ":" in feedback else fc.teacher.channel.kind
@@ -155,6 +157,7 @@ class TamerRun:
             self.teacher.observe(first, times, sig)
             self.teacher.emit_due(self.queue, self.clock())
         accepted = self.process_events(step=first + n - 1)
+        self.add_silent_steps(t0)
         if self.use_model:
             self.model.maybe_replay(n)
         self.first_step += n
@@ -183,6 +186,19 @@ class TamerRun:
             self.credited += len(w)
             credits.append(credit)
         return credits
+
+    def add_silent_steps(self, now: float) -> int:
+        """Steps whose credit window had closed by `now` (the time of the chunk's drain: its recorded t0, so a
+        replay judges the same steps) with no event crediting them become rows with target 0 and weight
+        `credit.silence_weight` (0: none, as Deep TAMER). Returns how many rows were added."""
+        w = self.config.feedback.credit.silence_weight
+        closed = self.step_clock.step_at(now - self.silence_reach) if len(self.step_clock) else None
+        if not (self.use_model and w > 0 and closed is not None and closed > self.silent_next):
+            return 0
+        obs, act, weight, target = self.history.silent_samples(self.silent_next, closed - 1, w)
+        self.silent_next = closed
+        self.model.add(obs, act, weight, target, update=False)  # replayed with the events' rows
+        return len(weight)
 
     def close(self) -> None:
         if self.log is not None:

@@ -22,7 +22,7 @@ Scoring rule (hidden from the learner)
     freeze; see there why it is built that way.
 
 Giving model
-    A step whose noticed |score| >= threshold is eligible; the teacher gives with probability `give_rate`, never
+    A step is eligible when every clause that holds has been noticed and |score| >= threshold; the teacher gives with probability `give_rate`, never
     within `min_gap_steps` of its last feedback, and not while silent (a two-state Markov chain with
     long-run silent fraction `silence_fraction` and mean silent period `silence_mean_s`). With
     probability `flip_prob` it gives the opposite sign (a mistake). Each given feedback has a reaction
@@ -161,7 +161,10 @@ def teacher_step(config: TeacherConfig, dt: float, state: TeacherState, signals:
     p_enter = p_leave * config.silence_fraction / (1.0 - config.silence_fraction)
     u = jax.random.uniform(k_silence)
     silent = jnp.where(state.silent, u >= p_leave, u < p_enter)
-    eligible = (jnp.abs(noticed) >= max(config.threshold, 1e-6)) & (state.since_give >= config.min_gap_steps) & ~silent
+    # it judges a step when everything the step shows has been noticed: a head touch that has just slowed
+    # (score 0, the freeze not yet noticed) is not approved for the touch
+    eligible = ((jnp.abs(noticed) >= max(config.threshold, 1e-6)) & (noticed == score)
+                & (state.since_give >= config.min_gap_steps) & ~silent)
     give = eligible & (jax.random.uniform(k_give) < config.give_rate)
 
     intended = jnp.sign(noticed) * jnp.where(jax.random.uniform(k_flip) < config.flip_prob, -1.0, 1.0)

@@ -5,7 +5,7 @@ import pytest
 
 from mjx_protamer.human.channels import ChannelConfig, delay_cdf
 from mjx_protamer.human.clock import StepClock
-from mjx_protamer.human.credit import (CreditAssigner, CreditConfig, StepHistory, step_window_weights,
+from mjx_protamer.human.credit import (CreditAssigner, CreditConfig, StepHistory, silence_reach_s, step_window_weights,
                                        time_window_weight)
 from mjx_protamer.human.events import FeedbackEvent
 
@@ -102,6 +102,29 @@ def test_step_history_samples_skip_forgotten_steps():
     assert act[:, 0].tolist() == [11, 10, 9, 8, 7, 6, 5, 4]  # steps 0..3 were overwritten
     np.testing.assert_allclose(w, 0.9 ** np.arange(8), rtol=1e-6)
     assert (h == -1.0).all()
+
+
+def test_silent_steps_are_the_remembered_steps_no_credit_read():
+    """The host twin of the in-jit silent steps: after an event credits steps 8..11, the other remembered steps
+    of 4..11 are rows with target 0 and the silence weight; a forgotten step is skipped, and a step recorded
+    again is no longer marked credited."""
+    hist = StepHistory(capacity=8, obs_size=1, action_size=1)
+    hist.record(0, np.arange(12, dtype=np.float32)[:, None], np.zeros((12, 1), np.float32))
+    clock = StepClock(dt=1.0)
+    clock.record_chunk(0, 12, t0=0.0)
+    credit, _ = CreditAssigner(CreditConfig(scheme="step_window", window_steps=4), clock).assign(at(11.5))
+    hist.samples(credit)
+    obs, _, w, h = hist.silent_samples(2, 11, 0.03)
+    assert obs[:, 0].tolist() == [4, 5, 6, 7]  # steps 2, 3 forgotten (capacity 8), 8..11 credited
+    assert (h == 0).all() and np.allclose(w, 0.03)
+    hist.record(12, np.full((4, 1), 12.0, np.float32), np.zeros((4, 1), np.float32))  # overwrites 4..7
+    assert hist.silent_samples(12, 15, 1.0)[0][:, 0].tolist() == [12.0] * 4
+    # every event that could credit a step has arrived this long after it
+    keyboard, speech = ChannelConfig("keyboard"), ChannelConfig("speech")
+    assert silence_reach_s(CreditConfig(), 0.005, keyboard) == pytest.approx(0.35 + 3.3 * 0.1)
+    assert silence_reach_s(CreditConfig(), 0.005, speech) > 1.6 + speech.arrival_offset_s
+    assert silence_reach_s(CreditConfig(scheme="step_window"), 0.005) == pytest.approx(0.075)
+    assert silence_reach_s(CreditConfig(scheme="time_window"), 0.005) == 4.0
 
 
 def test_channel_credit_lands_where_the_person_was_looking():

@@ -26,7 +26,7 @@ TOY = ["pretrain.env_name=toy", "pretrain.ddpg.actor_hidden=[64,64]", "pretrain.
 def test_loop_smoke_events_flow_from_teacher_to_reward_model(tmp_path):
     cfg = load_feedback_config(None, TOY + ["pretrain.train.total_env_steps=1200", "pretrain.train.warmup_env_steps=400",
                                             "pretrain.ddpg.actor_hidden=[16]", "pretrain.ddpg.critic_hidden=[16,16]",
-                                            "feedback.reward_model.hidden=[16]"])
+                                            "feedback.reward_model.hidden=[16]", "feedback.credit.silence_weight=0.03"])
     run = TamerRun(cfg, PointReachEnv(cfg.pretrain.toy), feedback="simulated:keyboard", log_path=tmp_path / "fb.jsonl")
     before = run.model.predict(np.zeros((1, 6)), np.array([[0.0, 1.0]]))
     for _ in range(cfg.pretrain.train.num_chunks):
@@ -39,6 +39,11 @@ def test_loop_smoke_events_flow_from_teacher_to_reward_model(tmp_path):
     # every event judged a step the learner showed earlier
     assert all(e.details["about_step"] < run.first_step for e in logged)
     assert not np.allclose(before, run.model.predict(np.zeros((1, 6)), np.array([[0.0, 1.0]])))
+    # the teacher gives only +-1: the 0 rows are the steps it watched in silence, judged once their window closed
+    buf = run.model.buffer
+    zero = buf.target[:buf.size] == 0
+    assert zero.any() and np.allclose(buf.weight[:buf.size][zero], 0.03)
+    assert run.silent_next <= run.first_step - run.silence_reach / cfg.feedback.dt + 1
 
 
 @pytest.mark.slow

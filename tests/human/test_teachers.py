@@ -37,6 +37,24 @@ def test_rule_scores_new_regions_and_sustained_freezing():
     assert (out["value"][14:20, 1] == -1.0).all()
 
 
+def test_the_score_is_what_holds_now_and_feedback_waits_until_all_of_it_is_noticed():
+    """The score counts a clause while it holds (a function of the step); the teacher gives feedback only when
+    every clause that holds has held for its `sustain`: a touch that slows is not approved for the touch while
+    the freeze is not yet noticed, and neither is disapproved once both are (score 0)."""
+    rule = (Clause("obs:0", 1.0, above=0.5, sustain=3), Clause("obs:1", -1.0, above=0.5, sustain=5))
+    cfg = dataclasses.replace(EXACT, rule=rule)
+    sig = np.zeros((30, 1, 2), np.float32)
+    sig[0:20, 0, 0] = 1.0  # touching from step 0 to 19
+    sig[10:30, 0, 1] = 1.0  # slow from step 10 on
+    out = run(cfg, sig, arrival=False)
+    assert out["score"][:, 0].tolist() == [1.0] * 10 + [0.0] * 10 + [-1.0] * 10
+    given = np.flatnonzero(out["valid"][:, 0]).tolist()
+    # the touch noticed at step 2; from 10 the slowing is not yet noticed (score 0 anyway), from 14 it is and
+    # both cancel; from 20 the slowing alone, noticed since 14
+    assert given == list(range(2, 10)) + list(range(20, 30))
+    assert (out["value"][2:10, 0] == 1).all() and (out["value"][20:30, 0] == -1).all()
+
+
 def test_keyboard_feedback_arrives_after_the_reaction_delay():
     sig = np.zeros((80, 3, 2), np.float32)
     sig[[5, 30], :, 0] = 1.0
