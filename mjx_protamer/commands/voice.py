@@ -244,7 +244,7 @@ def cmd_synth(args) -> int:
     speakers = tuple(v.strip() for v in args.speakers.split(",") if v.strip()) if args.speakers else SPEAKERS
     try:
         counts = make_test_set(args.dir, speakers, noise_dbfs=args.noise_dbfs, seed=args.seed,
-                               max_per_group=args.max_per_group)
+                               max_per_group=args.max_per_group, probe=args.probe)
     except (RuntimeError, OSError) as e:
         return _fail(e)
     print(f"wrote {sum(counts.values())} utterances ({counts}) for {len(speakers)} speakers into {args.dir}; "
@@ -300,4 +300,6 @@ def register(subparsers) -> None:
     p.add_argument("--noise-dbfs", type=float, default=None, help="add white noise at this level")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-per-group", type=int, default=None, help="keep at most N sentences per tone and kind")
+    p.add_argument("--probe", action="store_true", help="also a probe/ split per speaker: one-word keywords in both "
+                                                         "tones and 12 fillers in two styles (the filler gate's test)")
     p.set_defaults(handler=cmd_synth)
