@@ -40,6 +40,12 @@ PROBE_FILLERS = ["hmm", "hm", "mm", "mmm", "uh", "um", "er", "erm", "ah", "eh", 
 
 JITTER = {"pitch": 6, "speed": 12, "amplitude": 15}
 
+# espeak-ng reads some fillers as letter names: "mm" as "em-em" (,Em'Em), "mmm" as "em-em-em", "hm" as
+# "aitch-em", "uhm" as "oom". Those are said with phonemes ([[...]]): a held hum, "h" into a hum, a schwa
+# into a hum. Before this, Whisper heard the spelled "em-em" as "Yeah man..." or "Amen", which is what
+# was said, not a filler misheard.
+SAID_AS = {"mm": "[[m:m:]]", "mmm": "[[m:m:m:]]", "hm": "[[hm:m:]]", "uhm": "[[@m:]]"}
+
 
 def plan(split: int, against: bool) -> list[dict]:
     """The utterances of one split (0 calib, 1 test): tone, words label, kind, text."""
@@ -70,7 +76,7 @@ def utterance(text: str, tone: str, voice: str, rng: np.random.Generator, sample
     base = STYLES[style]
     kw = {k: int(np.clip(base[k] + rng.integers(-j, j + 1), 0, 99 if k == "pitch" else 200))
           for k, j in JITTER.items()}
-    x = synthesize(text, style, sample_rate, voice=voice, **kw)
+    x = synthesize(SAID_AS.get(text, text), style, sample_rate, voice=voice, **kw)
     return with_silence(x, pad_s[0], pad_s[1], sample_rate, noise_dbfs=noise_dbfs,
                         seed=int(rng.integers(1 << 31)))
 

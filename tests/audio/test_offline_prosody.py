@@ -50,6 +50,25 @@ def test_synth_voice_probe_split_holds_one_word_keywords_in_both_tones_and_fille
     assert json.loads((tmp_path / "synth_voice.json").read_text())["probe"] is True
 
 
+def test_synthesised_fillers_are_one_syllable_not_spelled_letters():
+    """espeak-ng reads "mm" as the letter names "em-em" (,Em'Em) and "hm" as "aitch-em": the set says
+    those with phonemes, so each filler is one syllable at most (no secondary stress, one stress mark)."""
+    import subprocess
+
+    from voice_helpers import need_synth
+
+    need_synth()
+    from audio_frontend.testset import FILLERS, PROBE_FILLERS, SAID_AS
+
+    def phonemes(text):
+        return subprocess.run(["espeak-ng", "-q", "-x", "-v", "en-us", text], capture_output=True, text=True,
+                              check=True).stdout.strip()
+    assert "," in phonemes("mm") and "," in phonemes("hm")          # what espeak makes of them unaided
+    for word in sorted(set(FILLERS[0] + FILLERS[1] + PROBE_FILLERS)):
+        said = phonemes(SAID_AS.get(word, word))
+        assert "," not in said and said.count("'") <= 1, (word, said)
+
+
 def test_per_speaker_calibration_hears_tone_on_unseen_sentences(small_set):
     from audio_frontend.labelled import find_labelled, load_labelled
     from audio_frontend.scorers import FeatureProsodyScorer
