@@ -7,6 +7,7 @@ and nothing here imports JAX.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -220,7 +221,8 @@ def _validate_speakers(args, cfg) -> int:
                    "asr": f"{cfg.asr.backend}:{cfg.asr.model}",
                    "asr_decoding": {"window_s": cfg.asr.window_s, "pad": cfg.asr.pad, "beam_size": cfg.asr.beam_size,
                                     "num_hypotheses": cfg.asr.num_hypotheses, "compute_type": cfg.asr.compute_type,
-                                    "alternative_margin": cfg.sentiment.alternative_margin},
+                                    "alternative_margin": cfg.sentiment.alternative_margin,
+                                    "filler_gate": dataclasses.asdict(cfg.sentiment.filler_gate)},
                    "labels": "prosody by tone, whisper by words (labels.jsonl)",
                    "note": "synthesised espeak-ng voices are not real recordings"},
         "speakers": res["speakers"],
