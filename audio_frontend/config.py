@@ -158,7 +158,7 @@ class FillerGateConfig:
     """A signed decision is dropped (rule `filler_like`) when Whisper itself finds a hesitation filler
     nearly as likely as what it wrote: the decoder is forced through each candidate ("Mm", "Hmm", ...)
     followed by an end, and when the best candidate's log-probability per token is within `margin` of
-    the best transcript's, the word is not trusted ("Yeah." for an "er"). Candidates are the hums and
+    the best transcript's, the word is not trusted ("Damn." for a "hmm"). Candidates are the hums and
     the neutral vowel only: the open interjections (oh, ah, eh) are near real words ("no", "awful", "oh
     no") and cost right answers on the dev voices (docs/voice.md)."""
 
@@ -170,7 +170,8 @@ class FillerGateConfig:
     max_words: int | None = 3
 
     def validate(self) -> None:
-        check(0.0 <= self.margin <= 10.0, "margin", "must be within 0..10 (a difference of mean token log-probabilities)")
+        check(0.0 <= self.margin <= 10.0, "margin",
+              "must be within 0..10 (a difference of mean token log-probabilities)")
         check(bool(self.candidates), "candidates", "must name at least one filler (or set enabled: false)")
         check(all(len(c.split()) == 1 and c.strip() for c in self.candidates), "candidates", "must be single words")
         check(self.max_words is None or self.max_words >= 1, "max_words", "must be >= 1, or null for no limit")
@@ -258,5 +259,5 @@ def load_voice_config(path: str | Path | None = None, overrides: list[str] | Non
     return load_config(VoiceConfig, path, overrides)
 
 
-__all__ = ["AudioConfig", "VadConfig", "ProsodyConfig", "AsrConfig", "SentimentConfig", "FillerGateConfig", "ListenConfig",
-           "VoiceConfig", "load_voice_config", "ConfigError", "PACKAGED_WHISPER"]
+__all__ = ["AudioConfig", "VadConfig", "ProsodyConfig", "AsrConfig", "SentimentConfig", "FillerGateConfig",
+           "ListenConfig", "VoiceConfig", "load_voice_config", "ConfigError", "PACKAGED_WHISPER"]

@@ -326,7 +326,8 @@ class FasterWhisperTranscriber:
         for w, t, r in zip(words, ids, res):
             rows = np.asarray(r.logits[0], dtype=np.float64)   # one row per forced position
             lp = _log_softmax(rows[:len(t) + 1])
-            total = float(sum(lp[k, tok] for k, tok in enumerate(t))) + float(np.logaddexp.reduce(lp[len(t), self.end_tokens]))
+            end = float(np.logaddexp.reduce(lp[len(t), self.end_tokens]))
+            total = float(sum(lp[k, tok] for k, tok in enumerate(t))) + end
             out[w] = total / (len(t) + 1)
         return out
 

@@ -1,9 +1,10 @@
 """A labelled, synthesised voice test set (`protamer synth-voice DIR`): several speakers, tone vs words.
 
 Layout: DIR/<speaker>/<split>/<tone>/<nnn>.wav with split `calib` (what `protamer calibrate --wav-dir`
-reads), `test` (other sentences) and, with `--probe`, `probe` (one-word keywords and fillers), tone `pos`, `neg`, `neu` (neutral sentences) or `fillers`, and a
-DIR/<speaker>/<split>/labels.jsonl giving each file's tone, words (the sentiment of what is said), kind
-(`congruent`, `against` = words said in the opposite tone, `neutral`, `filler`) and text. Speakers are
+reads), `test` (other sentences) and, with `--probe`, `probe` (one-word keywords and fillers), tone `pos`,
+`neg`, `neu` (neutral sentences) or `fillers`, and a DIR/<speaker>/<split>/labels.jsonl giving each
+file's tone, words (the sentiment of what is said), kind (`congruent`, `against` = words said in the
+opposite tone, `neutral`, `filler`, `one_word`) and text. Speakers are
 espeak-ng voices and variants; tone is set by espeak pitch / speed / amplitude and sox effects
 (`audio_frontend.synth.STYLES`), jittered per utterance. Synthesised voices are not real recordings.
 """

@@ -33,7 +33,8 @@ def test_synth_voice_probe_split_holds_one_word_keywords_in_both_tones_and_fille
 
     cfg = voice_config().sentiment
     rows = plan_probe()
-    for words, keywords, label in ((PROBE_ONE_WORD[0], cfg.affirmative, "pos"), (PROBE_ONE_WORD[1], cfg.negative, "neg")):
+    for words, keywords, label in ((PROBE_ONE_WORD[0], cfg.affirmative, "pos"),
+                                   (PROBE_ONE_WORD[1], cfg.negative, "neg")):
         assert set(words) <= set(keywords)
         for w in words:
             assert {(r["tone"], r["words"], r["kind"]) for r in rows if r["text"] == w} == {
@@ -46,7 +47,8 @@ def test_synth_voice_probe_split_holds_one_word_keywords_in_both_tones_and_fille
     assert counts["one_word"] == 2                       # max_per_group: one per tone
     probe = tmp_path / "en-us" / "probe"
     labels = sorted(find_labelled(probe, "words")[0])
-    assert sorted(lab for _, lab in labels) == ["filler", "filler", "pos", "pos"] and all(p.is_file() for p, _ in labels)
+    assert sorted(lab for _, lab in labels) == ["filler", "filler", "pos", "pos"]
+    assert all(p.is_file() for p, _ in labels)
     assert json.loads((tmp_path / "synth_voice.json").read_text())["probe"] is True
 
 

@@ -233,7 +233,7 @@ class FillerScores:
 
 
 def test_the_filler_gate_drops_a_sign_when_a_filler_is_nearly_as_likely(rules):
-    """Whisper wrote "Yeah." for an "er": when the decoder finds a hesitation filler as the whole
+    """Whisper wrote "Yeah." for a filler: when the decoder finds a hesitation filler as the whole
     transcript within filler_gate.margin (1.0) of the best transcript's mean log-probability, the word
     is not trusted (rule filler_like, value 0); further below, the sign stands."""
     near = FillerScores("er", -1.9)
@@ -267,7 +267,8 @@ def test_the_filler_gate_is_asked_only_about_short_signed_transcripts(rules):
 
 
 def test_the_filler_gate_config_is_checked():
-    with pytest.raises(ConfigError, match=r"sentiment\.filler_gate\.candidates.*\['yeah'\] are not in sentiment\.fillers"):
+    with pytest.raises(ConfigError,
+                       match=r"sentiment\.filler_gate\.candidates.*\['yeah'\] are not in sentiment\.fillers"):
         voice_config("sentiment.filler_gate.candidates=[mm, yeah]")
     with pytest.raises(ConfigError, match=r"sentiment\.filler_gate\.margin"):
         voice_config("sentiment.filler_gate.margin=-1")
