@@ -154,6 +154,30 @@ class AsrConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class FillerGateConfig:
+    """A signed decision is dropped (rule `filler_like`) when Whisper itself finds a hesitation filler
+    nearly as likely as what it wrote: the decoder is forced through each candidate ("Mm", "Hmm", ...)
+    followed by an end, and when the best candidate's log-probability per token is within `margin` of
+    the best transcript's, the word is not trusted ("Damn." for a "hmm"). Candidates are the hums and
+    the neutral vowel only: the open interjections (oh, ah, eh) are near real words ("no", "awful", "oh
+    no") and cost right answers on the dev voices (docs/voice.md)."""
+
+    enabled: bool = True
+    margin: float = 1.0                 # mean token log-probability below the best transcript's
+    candidates: tuple[str, ...] = ("mm", "hmm", "hm", "uh", "um", "er")
+    # Only transcripts of at most this many words are checked (a filler is one syllable; Whisper made up
+    # to three words of one on the dev voices); null: all. Keeps the extra decoder pass off sentences.
+    max_words: int | None = 3
+
+    def validate(self) -> None:
+        check(0.0 <= self.margin <= 10.0, "margin",
+              "must be within 0..10 (a difference of mean token log-probabilities)")
+        check(bool(self.candidates), "candidates", "must name at least one filler (or set enabled: false)")
+        check(all(len(c.split()) == 1 and c.strip() for c in self.candidates), "candidates", "must be single words")
+        check(self.max_words is None or self.max_words >= 1, "max_words", "must be >= 1, or null for no limit")
+
+
+@dataclasses.dataclass(frozen=True)
 class SentimentConfig:
     # Behind the rules: "vader" (the VADER lexicon shipped by vaderSentiment, offline), "distilbert" (the
     # transformers classifier `model`, needs its weights) or "auto" (distilbert when its weights are on
@@ -183,6 +207,7 @@ class SentimentConfig:
     # `alternative`). Only keyword rules may decide there, never the classifier (which read sentiment into
     # misheard words: "You'll be dead."). null: off.
     alternative_margin: float | None = 1.0
+    filler_gate: FillerGateConfig = FillerGateConfig()
 
     def validate(self) -> None:
         check(bool(self.model.strip()), "model", "must name a model")
@@ -200,6 +225,8 @@ class SentimentConfig:
         check(all(len(k.split()) == 1 for k in self.discourse_markers), "discourse_markers", "must be single words")
         check(self.alternative_margin is None or 0.0 <= self.alternative_margin <= 10.0, "alternative_margin",
               "must be within 0..10 (a difference of mean token log-probabilities), or null")
+        stray = sorted({c.lower() for c in self.filler_gate.candidates} - {f.lower() for f in self.fillers})
+        check(not stray, "filler_gate.candidates", f"{stray} are not in sentiment.fillers")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -232,5 +259,5 @@ def load_voice_config(path: str | Path | None = None, overrides: list[str] | Non
     return load_config(VoiceConfig, path, overrides)
 
 
-__all__ = ["AudioConfig", "VadConfig", "ProsodyConfig", "AsrConfig", "SentimentConfig", "ListenConfig",
-           "VoiceConfig", "load_voice_config", "ConfigError", "PACKAGED_WHISPER"]
+__all__ = ["AudioConfig", "VadConfig", "ProsodyConfig", "AsrConfig", "SentimentConfig", "FillerGateConfig",
+           "ListenConfig", "VoiceConfig", "load_voice_config", "ConfigError", "PACKAGED_WHISPER"]

@@ -12,6 +12,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -161,6 +162,11 @@ class Transcript:
     timings: dict = field(default_factory=dict)   # seconds: features, encoder, decoder
     # the beam's other hypotheses, (text, avg_logprob), best first
     alternatives: tuple[tuple[str, float], ...] = ()
+    # `filler_logprob(words) -> (word, mean token log-probability)` of the most likely of these fillers
+    # as the whole transcript, from the same encoder output (FasterWhisperTranscriber); None elsewhere.
+    # Called by the rule layer only when it matters (a signed decision on a short transcript).
+    filler_logprob: Callable[[tuple[str, ...]], tuple[str, float]] | None = field(default=None, compare=False,
+                                                                                  repr=False)
 
 
 def transcript_of(transcriber, audio) -> Transcript:
@@ -175,6 +181,11 @@ def transcript_of(transcriber, audio) -> Transcript:
 # mapped by (x + 4) / 4. A zero sample therefore reads as max((-10 + 4) / 4, loudest - 2).
 _LOG10_FLOOR_FEATURE = (-10.0 + 4.0) / 4.0
 _DYNAMIC_RANGE_FEATURE = 8.0 / 4.0
+
+
+def _log_softmax(rows: np.ndarray) -> np.ndarray:
+    m = rows.max(axis=-1, keepdims=True)
+    return rows - m - np.log(np.exp(rows - m).sum(axis=-1, keepdims=True))
 
 
 def pad_features(feats: np.ndarray, frames: int, pad: str = "silence") -> np.ndarray:
@@ -235,6 +246,9 @@ class FasterWhisperTranscriber:
         # as faster-whisper's defaults: no non-speech symbols, no special tokens in the text
         self.suppress_tokens = list(get_suppressed_tokens(self.tokenizer, [-1]))
         prompt = list(self.tokenizer.sot_sequence) + [self.tokenizer.no_timestamps]
+        # what may follow a filler that is the whole transcript: an end of sentence or the end of text
+        self.end_tokens = [self.tokenizer.encode(p)[0] for p in (".", "...", "?", "!")] + [self.tokenizer.eot]
+        self._filler_ids: dict[str, list[int]] = {}
         if cfg.initial_prompt.strip():
             prompt = [self.tokenizer.sot_prev] + self.tokenizer.encode(" " + cfg.initial_prompt.strip()) + prompt
         self.prompt = prompt
@@ -275,9 +289,47 @@ class FasterWhisperTranscriber:
         hyps = [(self.tokenizer.decode(tokens).strip(),
                  float(score) * len(tokens) / (len(tokens) + 1) if score is not None else None)
                 for tokens, score in zip(r.sequences_ids, list(r.scores) or [None] * len(r.sequences_ids))]
-        return Transcript(hyps[0][0], hyps[0][1], float(r.no_speech_prob),
-                          {"features_s": t1 - t0, "encoder_s": t2 - t1, "decoder_s": t3 - t2,
-                           "encoder_frames": n}, tuple(hyps[1:]))
+        timings = {"features_s": t1 - t0, "encoder_s": t2 - t1, "decoder_s": t3 - t2, "encoder_frames": n}
+
+        asked: dict[tuple[str, ...], tuple[str, float]] = {}   # one forced decode per segment and word list
+
+        def filler_logprob(words: tuple[str, ...]) -> tuple[str, float]:
+            if words not in asked:
+                t4 = time.perf_counter()
+                asked[words] = max(self.filler_logprobs(enc, words).items(), key=lambda kv: kv[1])
+                timings["filler_s"] = time.perf_counter() - t4
+            return asked[words]
+
+        return Transcript(hyps[0][0], hyps[0][1], float(r.no_speech_prob), timings, tuple(hyps[1:]), filler_logprob)
+
+    def filler_ids(self, word: str) -> list[int]:
+        """Tokens of a filler as Whisper writes it opening a transcript: " Mm", " Hmm", " Uh"."""
+        if word not in self._filler_ids:
+            self._filler_ids[word] = self.tokenizer.encode(" " + word.strip().capitalize())
+        return self._filler_ids[word]
+
+    def filler_logprobs(self, enc, words: tuple[str, ...]) -> dict[str, float]:
+        """Per filler, the decoder's mean log-probability per token of the transcript being that filler
+        alone: its tokens, then an end (".", "...", "?", "!" or end of text, summed), as the beam scores
+        a hypothesis (`Transcript.avg_logprob`). One batched forced decode on the encoder output `enc`:
+        each prompt is the filler followed by ".", and the logits at the "." position give P(end | filler)."""
+        import ctranslate2
+
+        ids = [self.filler_ids(w) for w in words]
+        prompts = [self.prompt + t + [self.end_tokens[0]] for t in ids]
+        e = np.asarray(enc)
+        batch = ctranslate2.StorageView.from_array(np.ascontiguousarray(np.repeat(e, len(prompts), axis=0)))
+        res = self.model.model.generate(batch, prompts, beam_size=1, max_length=max(map(len, prompts)) + 1,
+                                        return_logits_vocab=True, suppress_blank=True,
+                                        suppress_tokens=self.suppress_tokens)
+        out = {}
+        for w, t, r in zip(words, ids, res):
+            rows = np.asarray(r.logits[0], dtype=np.float64)   # one row per forced position
+            lp = _log_softmax(rows[:len(t) + 1])
+            end = float(np.logaddexp.reduce(lp[len(t), self.end_tokens]))
+            total = float(sum(lp[k, tok] for k, tok in enumerate(t))) + end
+            out[w] = total / (len(t) + 1)
+        return out
 
     def transcribe(self, audio) -> str:
         return self.transcribe_scored(audio).text

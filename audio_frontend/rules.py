@@ -57,12 +57,16 @@ def is_negator(word: str) -> bool:
 class RuleDecision:
     value: float          # +1, -1 or 0
     # "keyword", "keyword_vote", "negated_negative", "prohibitive", "filler", "empty", "low_confidence",
-    # "classifier", "no_classifier", "alternative"
+    # "classifier", "no_classifier", "alternative", "filler_like"
     rule: str
     words: tuple[str, ...]
     label: str | None = None
     score: float | None = None
     alternative: str | None = None   # rule "alternative": the beam hypothesis whose keywords decided
+    # the filler gate's evidence when it was asked: (most likely filler, its mean token log-probability)
+    filler: tuple[str, float] | None = None
+    # rule "filler_like": the value the words would have given
+    gated_value: float | None = None
 
 
 # The rules by which keywords alone decide: what an alternative hypothesis may decide by.
@@ -76,7 +80,8 @@ NEUTRAL_LABEL = "NEUTRAL"
 class RuleLayer:
     def __init__(self, affirmative, negative, fillers, positive_labels=("POSITIVE",), negative_labels=("NEGATIVE",),
                  discourse_markers=(), min_avg_logprob: float | None = None,
-                 alternative_margin: float | None = None):
+                 alternative_margin: float | None = None, filler_gate=None):
+        """`filler_gate`: a `FillerGateConfig` (enabled, margin, candidates, max_words) or None (off)."""
         self.affirmative = {" ".join(words_of(k)) for k in affirmative}
         self.negative = {" ".join(words_of(k)) for k in negative}
         self.fillers = {" ".join(words_of(k)) for k in fillers}
@@ -85,6 +90,7 @@ class RuleLayer:
         self.negative_labels = {lab.lower() for lab in negative_labels}
         self.min_avg_logprob = min_avg_logprob
         self.alternative_margin = alternative_margin
+        self.filler_gate = filler_gate if filler_gate is not None and filler_gate.enabled else None
         self._phrases = sorted([(tuple(k.split()), 1.0) for k in self.affirmative if k]
                                + [(tuple(k.split()), -1.0) for k in self.negative if k], key=lambda t: -len(t[0]))
 
@@ -92,7 +98,8 @@ class RuleLayer:
     def from_config(cls, cfg, asr_cfg=None) -> "RuleLayer":
         """`cfg`: the `sentiment` section; `asr_cfg` (optional): the `asr` section, for the confidence gate."""
         return cls(cfg.affirmative, cfg.negative, cfg.fillers, cfg.positive_labels, cfg.negative_labels,
-                   cfg.discourse_markers, getattr(asr_cfg, "min_avg_logprob", None), cfg.alternative_margin)
+                   cfg.discourse_markers, getattr(asr_cfg, "min_avg_logprob", None), cfg.alternative_margin,
+                   cfg.filler_gate)
 
     def keyword_value(self, content: list[str]) -> float | None:
         phrase = " ".join(content)
@@ -150,13 +157,34 @@ class RuleLayer:
 
     def decide(self, transcript: str, classify: Callable[[str], tuple[str, float]] | None,
                avg_logprob: float | None = None,
-               alternatives: tuple[tuple[str, float | None], ...] = ()) -> RuleDecision:
+               alternatives: tuple[tuple[str, float | None], ...] = (),
+               filler_logprob: Callable[[tuple[str, ...]], tuple[str, float]] | None = None) -> RuleDecision:
         """`avg_logprob`: the recogniser's mean token log-probability, when it gives one; below
         `min_avg_logprob` the transcript is too unsure to give feedback. `alternatives`: the recogniser's
         other hypotheses `(text, avg_logprob)`; when the transcript has words but nothing decides (the
         classifier says neutral), the first of them within `alternative_margin` of `avg_logprob` whose
         keywords decide gives the value (rule "alternative"). A keyword the recogniser found nearly as
-        likely is kept; the classifier is never asked about an alternative."""
+        likely is kept; the classifier is never asked about an alternative. `filler_logprob(candidates)`:
+        the recogniser's (filler, mean token log-probability) of the most likely filler as the whole
+        transcript; a signed decision on a short transcript is dropped when that filler is within the
+        filler gate's margin of `avg_logprob` (rule "filler_like")."""
+        d = self._decide_words(transcript, classify, avg_logprob, alternatives)
+        return self._gate(d, avg_logprob, filler_logprob)
+
+    def _gate(self, d: RuleDecision, avg_logprob: float | None, filler_logprob) -> RuleDecision:
+        """The filler gate: a sign is kept only if no hesitation filler is nearly as likely a transcript."""
+        g = self.filler_gate
+        if (g is None or d.value == 0 or filler_logprob is None or avg_logprob is None
+                or (g.max_words is not None and len(d.words) > g.max_words)):
+            return d
+        word, lp = filler_logprob(tuple(g.candidates))
+        if lp >= avg_logprob - g.margin:
+            return RuleDecision(0.0, "filler_like", d.words, d.label, d.score, d.alternative, (word, float(lp)),
+                                gated_value=d.value)
+        return RuleDecision(d.value, d.rule, d.words, d.label, d.score, d.alternative, (word, float(lp)))
+
+    def _decide_words(self, transcript: str, classify, avg_logprob: float | None,
+                      alternatives: tuple[tuple[str, float | None], ...]) -> RuleDecision:
         d = self._decide(transcript, classify, avg_logprob)
         if (d.value != 0 or d.rule != "classifier" or self.alternative_margin is None or avg_logprob is None):
             return d

@@ -147,10 +147,12 @@ class WhisperScorer:
         tr = transcript_of(self.transcriber, np.asarray(audio, dtype=np.float32))
         t1 = time.perf_counter()
         d = self.rules.decide(tr.text, self.classify if self.classifier is not None else None, tr.avg_logprob,
-                              tr.alternatives)
+                              tr.alternatives, tr.filler_logprob)
         t2 = time.perf_counter()
         return d.value, {"transcript": tr.text, "rule": d.rule, "alternative": d.alternative,
                          "label": d.label, "label_score": d.score,
+                         "filler": d.filler[0] if d.filler else None,
+                         "filler_logprob": d.filler[1] if d.filler else None, "gated_value": d.gated_value,
                          "avg_logprob": tr.avg_logprob, "no_speech_prob": tr.no_speech_prob,
                          "sentiment": self.sentiment_name, "asr_model": self.cfg.asr.model,
                          "asr_backend": self.cfg.asr.backend, "asr_s": t1 - t0, **tr.timings,

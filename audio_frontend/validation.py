@@ -63,10 +63,11 @@ def _whisper_rows(loaded, transcriber, rules, classifiers: dict) -> dict[str, li
         asr_s = time.perf_counter() - t0
         for name, clf in classifiers.items():
             t1 = time.perf_counter()
-            d = rules.decide(tr.text, clf, tr.avg_logprob, tr.alternatives)
+            d = rules.decide(tr.text, clf, tr.avg_logprob, tr.alternatives, tr.filler_logprob)
             out[name].append(Scored(str(path), lab, d.value, asr_s + time.perf_counter() - t1,
                                     {"transcript": tr.text, "rule": d.rule, "alternative": d.alternative,
-                                     "avg_logprob": tr.avg_logprob, **tr.timings},
+                                     "avg_logprob": tr.avg_logprob, "filler": d.filler,
+                                     "gated_value": d.gated_value, **tr.timings},
                                     speech_s=utt.speech_s, vad_wait_s=utt.vad_wait_s))
     return out
 

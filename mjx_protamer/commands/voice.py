@@ -7,6 +7,7 @@ and nothing here imports JAX.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -220,7 +221,8 @@ def _validate_speakers(args, cfg) -> int:
                    "asr": f"{cfg.asr.backend}:{cfg.asr.model}",
                    "asr_decoding": {"window_s": cfg.asr.window_s, "pad": cfg.asr.pad, "beam_size": cfg.asr.beam_size,
                                     "num_hypotheses": cfg.asr.num_hypotheses, "compute_type": cfg.asr.compute_type,
-                                    "alternative_margin": cfg.sentiment.alternative_margin},
+                                    "alternative_margin": cfg.sentiment.alternative_margin,
+                                    "filler_gate": dataclasses.asdict(cfg.sentiment.filler_gate)},
                    "labels": "prosody by tone, whisper by words (labels.jsonl)",
                    "note": "synthesised espeak-ng voices are not real recordings"},
         "speakers": res["speakers"],
@@ -244,7 +246,7 @@ def cmd_synth(args) -> int:
     speakers = tuple(v.strip() for v in args.speakers.split(",") if v.strip()) if args.speakers else SPEAKERS
     try:
         counts = make_test_set(args.dir, speakers, noise_dbfs=args.noise_dbfs, seed=args.seed,
-                               max_per_group=args.max_per_group)
+                               max_per_group=args.max_per_group, probe=args.probe)
     except (RuntimeError, OSError) as e:
         return _fail(e)
     print(f"wrote {sum(counts.values())} utterances ({counts}) for {len(speakers)} speakers into {args.dir}; "
@@ -300,4 +302,6 @@ def register(subparsers) -> None:
     p.add_argument("--noise-dbfs", type=float, default=None, help="add white noise at this level")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-per-group", type=int, default=None, help="keep at most N sentences per tone and kind")
+    p.add_argument("--probe", action="store_true", help="also a probe/ split per speaker: one-word keywords in both "
+                                                         "tones and 12 fillers in two styles (the filler gate's test)")
     p.set_defaults(handler=cmd_synth)

@@ -179,3 +179,29 @@ def test_the_window_is_padded_with_the_log_mel_of_silence():
     assert whisper_own[:, tail].max() < seg.max() - 1.9   # silence: 8 log10 units (2 here) below the peak
     assert np.all(pad_features(seg, n, "zeros")[:, seg.shape[1]:] == 0.0)
     assert np.array_equal(pad_features(seg, 20, "silence"), seg[:, :20])   # a longer segment is cut, not padded
+
+
+def test_packaged_whisper_scores_fillers_for_the_gate(packaged_whisper, speech):
+    """The filler gate's evidence from the packaged tiny.en: forced through a filler, the decoder scores it
+    the way the beam scores a hypothesis, so on a hum (which it writes "Mm") the forced "mm" is about the
+    beam's own score, and a word heard with that confidence would be dropped; for said keywords ("yes",
+    "no", "good job") every filler is far less likely than the words, which keep their sign."""
+    from audio_frontend.rules import RuleLayer
+    from audio_frontend.scorers import WhisperScorer
+    from audio_frontend.synth import synthesize, with_silence
+
+    candidates = voice_config().sentiment.filler_gate.candidates
+    hum = with_silence(synthesize("[[m:m:]]", "filler"), 0.3, 0.6)     # phonemes: espeak spells "mm" "em-em"
+    tr = packaged_whisper.transcribe_scored(hum)
+    assert tr.text.strip(" .").lower() in ("mm", "mmm", "hmm"), tr
+    word, lp = tr.filler_logprob(candidates)
+    assert word in ("mm", "hmm", "hm") and abs(lp - tr.avg_logprob) < 0.5, (tr, word, lp)
+    assert tr.timings["filler_s"] > 0.0
+    rules = RuleLayer.from_config(voice_config().sentiment)
+    d = rules.decide("Yeah.", None, tr.avg_logprob, (), tr.filler_logprob)
+    assert (d.value, d.rule, d.gated_value) == (0, "filler_like", 1), d
+    scorer = WhisperScorer(voice_config(), transcriber=packaged_whisper, load_classifier=False)
+    for said, sign in (("yes", 1), ("no", -1), ("good job", 1)):
+        value, d = scorer.score(with_silence(speech[said], 0.25, 0.25))
+        assert (value, d["rule"]) == (sign, "keyword"), d
+        assert d["filler_logprob"] < d["avg_logprob"] - 2.0, d     # asked, and far from the gate

@@ -23,6 +23,54 @@ def test_synth_set_layout_labels_tone_and_words(small_set):
     assert not test & {json.loads(line)["text"] for line in calib.splitlines()}   # unseen sentences
 
 
+def test_synth_voice_probe_split_holds_one_word_keywords_in_both_tones_and_fillers(tmp_path):
+    """`synth-voice --probe`: per speaker a probe/ split, labelled by words, of single keywords said in
+    both tones (which a filler gate must leave signed) and fillers in two styles (which must give 0)."""
+    from voice_helpers import need_synth
+
+    from audio_frontend.labelled import find_labelled
+    from audio_frontend.testset import PROBE_FILLERS, PROBE_ONE_WORD, make_test_set, plan_probe
+
+    cfg = voice_config().sentiment
+    rows = plan_probe()
+    for words, keywords, label in ((PROBE_ONE_WORD[0], cfg.affirmative, "pos"),
+                                   (PROBE_ONE_WORD[1], cfg.negative, "neg")):
+        assert set(words) <= set(keywords)
+        for w in words:
+            assert {(r["tone"], r["words"], r["kind"]) for r in rows if r["text"] == w} == {
+                ("pos", label, "one_word"), ("neg", label, "one_word")}
+    assert set(PROBE_FILLERS) <= set(cfg.fillers)
+    assert {(r["text"], r["tone"]) for r in rows if r["kind"] == "filler"} == {
+        (w, t) for w in PROBE_FILLERS for t in ("fillers", "neu")}
+    need_synth()
+    counts = make_test_set(tmp_path, speakers=("en-us",), max_per_group=1, probe=True)
+    assert counts["one_word"] == 2                       # max_per_group: one per tone
+    probe = tmp_path / "en-us" / "probe"
+    labels = sorted(find_labelled(probe, "words")[0])
+    assert sorted(lab for _, lab in labels) == ["filler", "filler", "pos", "pos"]
+    assert all(p.is_file() for p, _ in labels)
+    assert json.loads((tmp_path / "synth_voice.json").read_text())["probe"] is True
+
+
+def test_synthesised_fillers_are_one_syllable_not_spelled_letters():
+    """espeak-ng reads "mm" as the letter names "em-em" (,Em'Em) and "hm" as "aitch-em": the set says
+    those with phonemes, so each filler is one syllable at most (no secondary stress, one stress mark)."""
+    import subprocess
+
+    from voice_helpers import need_synth
+
+    need_synth()
+    from audio_frontend.testset import FILLERS, PROBE_FILLERS, SAID_AS
+
+    def phonemes(text):
+        return subprocess.run(["espeak-ng", "-q", "-x", "-v", "en-us", text], capture_output=True, text=True,
+                              check=True).stdout.strip()
+    assert "," in phonemes("mm") and "," in phonemes("hm")          # what espeak makes of them unaided
+    for word in sorted(set(FILLERS[0] + FILLERS[1] + PROBE_FILLERS)):
+        said = phonemes(SAID_AS.get(word, word))
+        assert "," not in said and said.count("'") <= 1, (word, said)
+
+
 def test_per_speaker_calibration_hears_tone_on_unseen_sentences(small_set):
     from audio_frontend.labelled import find_labelled, load_labelled
     from audio_frontend.scorers import FeatureProsodyScorer

@@ -219,3 +219,58 @@ def test_only_the_keywords_of_an_alternative_count_never_the_classifier(rules):
     assert seen == ["you'll be deep"]                    # the classifier saw the best transcript only
     d = rules.decide("You'll be deep.", classify, -1.07, alts[:2])
     assert (d.value, d.rule) == (0, "classifier")
+
+
+class FillerScores:
+    """A recogniser's filler evidence: (filler, mean token log-probability), counting the calls."""
+
+    def __init__(self, word="mm", logprob=-1.5):
+        self.answer, self.calls = (word, logprob), []
+
+    def __call__(self, candidates):
+        self.calls.append(candidates)
+        return self.answer
+
+
+def test_the_filler_gate_drops_a_sign_when_a_filler_is_nearly_as_likely(rules):
+    """Whisper wrote "Yeah." for a filler: when the decoder finds a hesitation filler as the whole
+    transcript within filler_gate.margin (1.0) of the best transcript's mean log-probability, the word
+    is not trusted (rule filler_like, value 0); further below, the sign stands."""
+    near = FillerScores("er", -1.9)
+    d = rules.decide("Yeah.", never, -1.1, (), near)
+    assert (d.value, d.rule, d.gated_value, d.filler) == (0, "filler_like", 1, ("er", -1.9))
+    assert near.calls == [("mm", "hmm", "hm", "uh", "um", "er")]      # the configured candidates
+    far = FillerScores("mm", -2.2)
+    d = rules.decide("Yeah.", never, -1.1, (), far)
+    assert (d.value, d.rule, d.gated_value, d.filler) == (1, "keyword", None, ("mm", -2.2))
+    # any signed decision: the classifier's, a keyword vote, an alternative's keyword
+    assert rules.decide("Thank you.", lambda t: ("POSITIVE", 0.4), -1.0, (), FillerScores("hm", -1.5)).rule == \
+        "filler_like"
+    d = rules.decide("But move.", neutral, -0.65, (("Bad move.", -1.25),), FillerScores("mm", -1.0))
+    assert (d.value, d.rule, d.gated_value) == (0, "filler_like", -1)
+
+
+def test_the_filler_gate_is_asked_only_about_short_signed_transcripts(rules):
+    """No feedback already (fillers, neutral sentences), more than filler_gate.max_words (3) words, no
+    scores from the backend, or the gate off: the recogniser is not asked (the forced decode costs time)."""
+    asked = FillerScores("mm", 0.0)
+    assert rules.decide("Um...", never, -1.0, (), asked).rule == "filler"
+    assert rules.decide("Look at the hand.", neutral, -1.0, (), asked).value == 0
+    assert rules.decide("Yes, that was great.", never, -1.0, (), asked).value == 1     # 4 words
+    assert rules.decide("Yes.", never, None, (), asked).value == 1                    # no avg_logprob
+    assert asked.calls == []
+    assert rules.decide("Yes.", never, -1.0, (), None).value == 1                     # no filler scores
+    off = RuleLayer.from_config(voice_config("sentiment.filler_gate.enabled=false").sentiment)
+    assert off.decide("Yeah.", never, -1.1, (), asked).value == 1 and asked.calls == []
+    wide = RuleLayer.from_config(voice_config("sentiment.filler_gate.max_words=null").sentiment)
+    assert wide.decide("Yes, that was great.", never, -1.0, (), asked).rule == "filler_like"
+
+
+def test_the_filler_gate_config_is_checked():
+    with pytest.raises(ConfigError,
+                       match=r"sentiment\.filler_gate\.candidates.*\['yeah'\] are not in sentiment\.fillers"):
+        voice_config("sentiment.filler_gate.candidates=[mm, yeah]")
+    with pytest.raises(ConfigError, match=r"sentiment\.filler_gate\.margin"):
+        voice_config("sentiment.filler_gate.margin=-1")
+    with pytest.raises(ConfigError, match=r"sentiment\.filler_gate\.max_words"):
+        voice_config("sentiment.filler_gate.max_words=0")

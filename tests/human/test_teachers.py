@@ -97,7 +97,7 @@ def test_speech_arrives_later_than_keyboard():
     sig[10, :, 0] = 1.0
     speech = run(with_channel(EXACT, "speech"), sig)
     (t,) = np.flatnonzero(speech["valid"][:, 0])
-    assert t == 10 + round((0.8 + 0.87 + 0.502) / DT)
+    assert t == 10 + round((0.8 + 0.865 + 0.540) / DT)
 
 
 def test_host_teacher_feeds_the_real_queue_on_a_virtual_clock():
@@ -153,7 +153,7 @@ def test_signal_errors_name_the_field_and_what_is_allowed():
 def test_teacher_config_from_yaml_dict():
     cfg = from_dict(TeacherConfig, {"rule": [{"signal": "region", "value": 1.0, "above": 0.0}],
                                     "channel": {"kind": "speech"}})
-    assert cfg.rule[0] == Clause("region", 1.0, above=0.0) and cfg.channel.get("latency_s") == 0.502
+    assert cfg.rule[0] == Clause("region", 1.0, above=0.0) and cfg.channel.get("latency_s") == 0.540
     with pytest.raises(ConfigError, match="confusion"):
         from_dict(TeacherConfig, {"channel": {"confusion": [1, 0, 0, 0, 1, 0, 0, 0, 0.5]}})
 
