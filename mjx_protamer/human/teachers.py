@@ -78,7 +78,7 @@ class Clause:
 
 # The default hidden rule (self-touch): "touch your head, and keep moving" (a caregiver playing "where is your
 # head?"). The head is touched on 1% of the intrinsic-reward baseline's test steps (5 seeds,
-# docs/results/table2_hand_rule/body_map_DDPG.png): the intrinsic reward does not push there, so whatever DTK
+# docs/results/table2_right_hand_rule/body_map_DDPG.png): the intrinsic reward does not push there, so whatever DTK
 # does beyond that is the teacher's doing, and the baseline's score is near 0 on every seed rather than a coin
 # toss. Each clause is visible in (s, a) (a head touch through the touch features' contact position and the arm
 # posture; "frozen" is the freeze metric's own definition: arm joint speed below env.freeze_speed, 1 rad/s,
