@@ -18,6 +18,9 @@
    reaches back into earlier chunks: the (obs, action) of the last H = lag_len - 1 steps of every env are
    carried in `FeedbackState.history` (H, B, ...), so a credited step is read from the history or from the
    chunk's own transitions, never from the DDPG replay;
+   Steps whose credit window closed with no arrival (the teacher watched in silence) are drawn too
+   (`batched.draw_silent_steps`, `silence_rows_per_chunk` rows) as target 0, each silent step weighing
+   `credit.silence_weight` events; the arrivals of the last H steps are carried for that;
 4. the rows go to the device feedback ring (1e4 rows, `batched.ring_add`) and the reward model takes
    `updates_per_feedback` minibatch steps on the chunk's new rows plus `chunk_steps // replay_every`
    replay minibatches (weighted squared loss, Adam, `batched.reward_model_updates`).
