@@ -90,9 +90,9 @@ class BatchedFeedbackConfig:
               f"must be >= -1, got {self.replay_updates_per_chunk}")
 
 
-def human_reward(hidden):
+def human_reward(hidden, bounded: bool = False):
     """r_hat gated by a gain: `human_params = {"params": ..., "gain": scalar}`."""
-    apply = reward_fn(tuple(hidden))
+    apply = reward_fn(tuple(hidden), bounded)
 
     def fn(hp, obs, action):
         return hp["gain"] * apply(hp["params"], obs, action)
@@ -153,12 +153,12 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     B, T = tc.num_envs, tc.chunk_steps
     rmc = fc.reward_model
     hidden = tuple(rmc.hidden)
-    trainer = make_train(config, env, human_reward_fn=human_reward(hidden))
+    trainer = make_train(config, env, human_reward_fn=human_reward(hidden, rmc.bounded))
     n_dev = trainer.num_devices
     sharded = trainer.mesh is not None
     local_B = B // n_dev
-    apply = reward_fn(hidden)
-    net = RewardMLP(hidden)
+    apply = reward_fn(hidden, rmc.bounded)
+    net = RewardMLP(hidden, rmc.bounded)
     opt = optax.adam(rmc.learning_rate)
     obs_size, act_size = env.observation_size, env.action_size
     cols = env_signal_columns(fc.teacher.signals, env)
@@ -329,6 +329,7 @@ def default_feedback_config(kind: str):
 
     base = FeedbackConfig()
     return dataclasses.replace(base, credit=dataclasses.replace(base.credit, scheme="channel", silence_weight=0.03),
+                               reward_model=dataclasses.replace(base.reward_model, bounded=True),
                                teacher=with_channel(base.teacher, kind))
 
 

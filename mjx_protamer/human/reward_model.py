@@ -38,6 +38,9 @@ class RewardModelConfig:
     updates_per_feedback: int = 1  # gradient steps on the new rows when an event is credited
     replay_every: int = 10  # env steps between replay minibatches (0: never)
     replay_min_rows: int = 64  # no replay before the buffer holds this many rows
+    # tanh on the output: r_hat stays in [-1, 1], the labels' range, so the actor cannot find states the model
+    # never saw labelled and rates above every label (measured on DTK, docs/experiments.md); False: linear
+    bounded: bool = False
 
     def validate(self) -> None:
         check(len(self.hidden) >= 1 and min(self.hidden) > 0, "hidden",
@@ -53,20 +56,23 @@ class RewardModelConfig:
 
 class RewardMLP(nn.Module):
     hidden: Sequence[int] = (256, 256)
+    bounded: bool = False
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
         x = jnp.concatenate([obs, action], axis=-1)
         for width in self.hidden:
             x = nn.relu(nn.Dense(width)(x))
-        return nn.Dense(1)(x)[..., 0]
+        out = nn.Dense(1)(x)[..., 0]
+        return jnp.tanh(out) if self.bounded else out
 
 
 @functools.lru_cache(maxsize=None)
-def reward_fn(hidden: tuple[int, ...] = (256, 256)) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
+def reward_fn(hidden: tuple[int, ...] = (256, 256),
+              bounded: bool = False) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
     """The pure r_hat(params, obs (B, obs), action (B, act)) -> (B,); one object per architecture, so
     jit caches keyed on it stay warm."""
-    net = RewardMLP(tuple(hidden))
+    net = RewardMLP(tuple(hidden), bounded)
 
     def apply(params, obs, action):
         return net.apply(params, obs, action)
@@ -127,8 +133,8 @@ class RewardModel:
     def __init__(self, config: RewardModelConfig, obs_size: int, action_size: int, seed: int = 0):
         self.config = config
         self.obs_size, self.action_size = obs_size, action_size
-        self.apply = reward_fn(tuple(config.hidden))
-        net = RewardMLP(tuple(config.hidden))
+        self.apply = reward_fn(tuple(config.hidden), config.bounded)
+        net = RewardMLP(tuple(config.hidden), config.bounded)
         self.params = net.init(jax.random.PRNGKey(seed), jnp.zeros((1, obs_size)), jnp.zeros((1, action_size)))
         self.optimizer = optax.adam(config.learning_rate)
         self.opt_state = self.optimizer.init(self.params)

@@ -32,6 +32,20 @@ def test_learns_a_known_synthetic_reward_from_weighted_noisy_feedback():
     assert corr > 0.9, corr
 
 
+def test_a_bounded_model_never_rates_beyond_the_labels():
+    """`bounded`: the same params through tanh, so off the labelled states r_hat cannot exceed +-1 however far
+    the linear model would extrapolate; checkpoints of either kind share one params tree."""
+    params = RewardMLP((8,)).init(jax.random.PRNGKey(0), jnp.zeros((1, OBS)), jnp.zeros((1, ACT)))
+    obs = 50.0 * jax.random.normal(jax.random.PRNGKey(1), (256, OBS))  # far outside any training state
+    act = jnp.zeros((256, ACT))
+    linear, bounded = reward_fn((8,))(params, obs, act), reward_fn((8,), True)(params, obs, act)
+    assert float(jnp.abs(linear).max()) > 1.5
+    np.testing.assert_allclose(bounded, jnp.tanh(linear), rtol=1e-6)
+    model = RewardModel(RewardModelConfig(hidden=(8,), bounded=True), OBS, ACT, seed=0)
+    assert jax.tree.structure(model.params) == jax.tree.structure(params)
+    assert np.abs(model.predict(np.asarray(obs), np.asarray(act))).max() <= 1.0
+
+
 def test_weighted_loss_ignores_zero_weight_rows():
     apply = reward_fn((4,))
     params = jax.tree.map(jnp.zeros_like, RewardMLP((4,)).init(jax.random.PRNGKey(0), jnp.zeros((1, 2)), jnp.zeros((1, 1))))
