@@ -1,7 +1,7 @@
 """DeepTAMER's human-reward model r_hat(s, a): a Flax MLP fitted to credited feedback.
 
 - Network: MLP 256-256 (ReLU) on concat(obs, action), linear scalar output (Warnell et al. 2018; spec,
-  "The reference learners").
+  "The reference learners"), or with `bounded` its tanh: r_hat within the labels' [-1, 1].
 - Loss: weighted squared error `sum_i w_i (r_hat(s_i, a_i) - h_i)^2 / sum_i w_i`, with w the credit
   weight of the step (`credit.py`) and h the feedback value.
 - Feedback replay buffer (host NumPy ring, 1e4 rows): each credited step is one row (obs, action, w, h).
