@@ -6,11 +6,12 @@ Scoring rule (hidden from the learner)
     A list of clauses over named per-step signals. A clause holds while its signal is above `above` and
     below `below`; the step's score (what the teacher wants, the `teacher_score` metric) is the clipped sum of
     the values of the clauses that hold at that step: a function of the step alone. The teacher *notices* a
-    clause once it has held for `sustain` consecutive steps, and gives feedback only on what it noticed (the
-    clipped sum of the noticed clauses' values): a person reacts to a touch held for 0.1 s, not to a graze.
-    (The score used to wait for `sustain` too; no function of (s, a) could then track it: on DTK's test
-    states the best function of the clauses' current signals reached corr 0.44-0.78, measured, issue 8.) The signals (`signal_columns` resolves them against the env, `rule_signals` extracts them, the
-    one implementation for the in-jit chunk, table2's test episodes and the host teacher):
+    clause once it has held for `sustain` consecutive steps, and judges a step only when every clause that
+    holds there has been noticed: a person reacts to a touch held for 0.1 s, not to a graze. (The score used
+    to wait for `sustain` too; no function of (s, a) could then track it: on DTK's test states the best
+    function of the clauses' current signals reached corr 0.44-0.78, measured, issue 8.)
+    The signals (`signal_columns` resolves them against the env, `rule_signals` extracts them, the one
+    implementation for the in-jit chunk, table2's test episodes and the host teacher):
     - a reward term of the env by name (e.g. "region", "contact", "movement", "joint_limit");
     - "obs:i", "action:i", and "obs_norm:a:b[,c:d]" (the L2 norm of obs slices, e.g. arm speed);
     - "region:NAME": 1.0 while that body region is touched (the env's per-step `region_mask`; NAME one of
@@ -22,9 +23,10 @@ Scoring rule (hidden from the learner)
     freeze; see there why it is built that way.
 
 Giving model
-    A step is eligible when every clause that holds has been noticed and |score| >= threshold; the teacher gives with probability `give_rate`, never
-    within `min_gap_steps` of its last feedback, and not while silent (a two-state Markov chain with
-    long-run silent fraction `silence_fraction` and mean silent period `silence_mean_s`). With
+    A step is eligible when every clause that holds has been noticed and |score| >= threshold; the teacher
+    gives with probability `give_rate`, never within `min_gap_steps` of its last feedback, and not while
+    silent (a two-state Markov chain with long-run silent fraction `silence_fraction` and mean silent period
+    `silence_mean_s`). With
     probability `flip_prob` it gives the opposite sign (a mistake). Each given feedback has a reaction
     delay ~ max(delay_min_s, Normal(delay_mean_s, delay_std_s)) from the step it is about.
 
@@ -151,9 +153,8 @@ def teacher_step(config: TeacherConfig, dt: float, state: TeacherState, signals:
     below = jnp.asarray([jnp.inf if c.below is None else c.below for c in rule])
     values = jnp.asarray([c.value for c in rule])
     sustain = jnp.asarray([c.sustain for c in rule])
-    cond = (signals > above) & (signals < below)
-    runs = jnp.where(cond, state.runs + 1, 0)
-    score = jnp.clip(jnp.sum(jnp.where(cond, values, 0.0)), -1.0, 1.0)
+    runs = jnp.where((signals > above) & (signals < below), state.runs + 1, 0)
+    score = rule_scores(config, signals)
     noticed = jnp.clip(jnp.sum(jnp.where(runs >= sustain, values, 0.0)), -1.0, 1.0)
 
     k_silence, k_give, k_flip, k_noise, k_delay = jax.random.split(key, 5)
