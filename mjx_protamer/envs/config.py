@@ -56,6 +56,9 @@ class RewardConfig:
     energy_coef: float = 0.001
     limit_threshold: float = 0.8
     limit_coef: float = 0.8
+    # Pays sum over touched regions of (1 - familiarity): a region is worth touching while it is
+    # unfamiliar. Zero unless the env keeps a familiarity trace (EnvConfig.habituation_s > 0).
+    habituation: float = 1.0
 
     PRESETS = ("infant", "paper")
 
@@ -64,7 +67,8 @@ class RewardConfig:
         if name == "infant":
             return RewardConfig()
         if name == "paper":
-            return RewardConfig(contact_scale=4.0, contact_gain=0.05, novelty_force_scale=0.0, novelty_clip=0.0)
+            return RewardConfig(contact_scale=4.0, contact_gain=0.05, novelty_force_scale=0.0, novelty_clip=0.0,
+                            habituation=0.0)
         from mjx_protamer.config import ConfigError
         raise ConfigError(f"config field 'reward': unknown preset {name!r}; presets: {', '.join(RewardConfig.PRESETS)}")
 
@@ -78,14 +82,15 @@ class RewardConfig:
         check(self.novelty_clip >= 0, "novelty_clip", f"must be >= 0 (0: no clip), got {self.novelty_clip}")
 
     def weights(self) -> tuple[float, ...]:
-        return (self.contact, self.novelty, self.region, self.movement, self.energy, self.joint_limit)
+        return (self.contact, self.novelty, self.region, self.movement, self.energy, self.joint_limit,
+                self.habituation)
 
 
 # Physics backends: MJX (JAX, for accelerators) or native C MuJoCo through a callback (for CPUs);
 # "auto" picks native when JAX runs on the CPU and MJX otherwise (experiments/env_factory.py).
 BACKENDS = ("auto", "mjx", "native")
 
-REWARD_TERMS = ("contact", "novelty", "region", "movement", "energy", "joint_limit")
+REWARD_TERMS = ("contact", "novelty", "region", "movement", "energy", "joint_limit", "habituation")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,6 +110,15 @@ class EnvConfig:
     # Kuniyoshi & Sangawa's fetal self-touch models); a deterministic policy with no clock can only settle
     # into a fixed pose once its exploration noise is off, one with a clock can keep moving.
     oscillator_hz: float = 1.0
+    # Habituation to one's own touch: a familiarity trace per region (8), rising towards 1 with time
+    # constant `habituation_s` while the region is touched and decaying with `recovery_s` while it is not.
+    # The reward's `habituation` term pays for touching unfamiliar regions, and the trace is appended to
+    # the observation so the critic can see what it pays for. Infants habituate to a repeated touch and
+    # recover from it (docs/experiments.md); the spec's region term pays any onset, so one region
+    # tapped or pressed forever earns as much as a tour of the body. 0 switches it off (the paper's obs,
+    # and the field's value in configs written before it existed).
+    habituation_s: float = 0.0
+    recovery_s: float = 5.0
     reset_noise_steps: int = 10
     reset_noise_scale: float = 0.1
     reset_pool_size: int = 256
@@ -128,6 +142,9 @@ class EnvConfig:
         check(0 <= self.action_filter_s <= 2, "action_filter_s",
               f"must be in [0, 2] s (0: no filter), got {self.action_filter_s}")
         check(0 <= self.oscillator_hz <= 20, "oscillator_hz", f"must be in [0, 20] Hz (0: off), got {self.oscillator_hz}")
+        check(0 <= self.habituation_s <= 60, "habituation_s",
+              f"must be in [0, 60] s (0: no habituation), got {self.habituation_s}")
+        check(0 < self.recovery_s <= 600, "recovery_s", f"must be in (0, 600] s, got {self.recovery_s}")
         check(self.freeze_speed > 0, "freeze_speed", f"must be > 0 rad/s, got {self.freeze_speed}")
         check(0 <= self.reset_noise_steps <= 200, "reset_noise_steps", f"must be in [0, 200], got {self.reset_noise_steps}")
         check(0 <= self.reset_noise_scale <= 1, "reset_noise_scale", f"must be in [0, 1], got {self.reset_noise_scale}")
@@ -144,4 +161,10 @@ class EnvConfig:
     @property
     def observation_size(self) -> int:
         return (4 * (self.k + 3) + len(self.qpos_joints) + len(self.qvel_joints) + len(self.torque_actuators)
-                + (2 if self.oscillator_hz > 0 else 0))
+                + (2 if self.oscillator_hz > 0 else 0) + (len(body.REGIONS) if self.habituation_s > 0 else 0))
+
+    def familiarity_rates(self) -> tuple[float, float]:
+        """Per-step retention of unfamiliarity while touched and of familiarity while not (reward.habituate)."""
+        import math
+        dt = self.physics.timestep
+        return math.exp(-dt / self.habituation_s), math.exp(-dt / self.recovery_s)

@@ -128,14 +128,18 @@ def _start_pool(m: mujoco.MjModel, settled: mujoco.MjData, rest: np.ndarray, con
     return tuple(np.stack(x) for x in out)
 
 
-def observe(xp, model: SelfTouchModel, touch, qpos, qvel, actuator_force, time=0.0, oscillator_hz: float = 0.0):
+def observe(xp, model: SelfTouchModel, touch, qpos, qvel, actuator_force, time=0.0, oscillator_hz: float = 0.0,
+            familiarity=None):
     """The observation: [s_left(k), s_right(k), s_qpos, s_qvel, s_torque] (the paper's 84 dims), then, with
     an oscillator, [sin, cos] of its phase 2 pi f t (t the episode time): a rhythm generator the policy can
-    drive movement from (see EnvConfig.oscillator_hz)."""
+    drive movement from (see EnvConfig.oscillator_hz); then, with habituation, the 8 regions' familiarity
+    (EnvConfig.habituation_s)."""
     parts = [touch, qpos[model.qpos_idx], qvel[model.qvel_idx], actuator_force[model.torque_idx]]
     if oscillator_hz > 0:
         phase = 2.0 * math.pi * oscillator_hz * time
         parts.append(xp.stack([xp.sin(phase), xp.cos(phase)]).astype(touch.dtype))
+    if familiarity is not None:
+        parts.append(xp.asarray(familiarity, dtype=touch.dtype))
     return xp.concatenate(parts)
 
 

@@ -16,7 +16,7 @@ from mjx_protamer.envs import body, sensing
 from mjx_protamer.envs.base import State
 from mjx_protamer.envs.config import REWARD_TERMS, EnvConfig
 from mjx_protamer.envs.model import arm_speed, build_model, observe
-from mjx_protamer.envs.reward import reward_terms
+from mjx_protamer.envs.reward import habituate, reward_terms
 
 
 class SelfTouchEnv:
@@ -96,11 +96,15 @@ class SelfTouchEnv:
         return sensing.sense(jnp, self._tables, self.config.k, geom, pos, dist, normal,
                              d.geom_xpos, d.geom_xmat)
 
-    def _transition(self, d, touch, regions, extended, prev_touch, prev_regions, action):
+    def _transition(self, d, touch, regions, extended, prev_touch, prev_regions, action, familiarity):
+        """Observation, reward, metrics and the familiarity trace after this step (zeros without habituation)."""
         speed = arm_speed(jnp, self.model, d.qvel)
+        habituating = self.config.habituation_s > 0
+        after = habituate(jnp, familiarity, regions, self.config.familiarity_rates()) if habituating else familiarity
         terms = reward_terms(jnp, self.config.reward, touch, prev_touch, regions, prev_regions, speed,
-                             d.actuator_force, action)
-        obs = observe(jnp, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz)
+                             d.actuator_force, action, familiarity if habituating else None)
+        obs = observe(jnp, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz,
+                      after if habituating else None)
         metrics = {
             "reward_terms": terms,
             "self_contact": jnp.any(regions).astype(jnp.float32),
@@ -108,15 +112,17 @@ class SelfTouchEnv:
             "extended_region_mask": extended.astype(jnp.float32),
             "arm_speed": speed,
         }
-        return obs, terms @ self._weights, metrics
+        return obs, terms @ self._weights, metrics, after
 
     # --- the env API ----------------------------------------------------------------------------
     def _start_state(self, d: mjx.Data) -> State:
         touch, regions, extended = self.sense(d)
         zero_action = jnp.zeros(self.action_size)
-        obs, _, metrics = self._transition(d, touch, regions, extended, touch, regions, zero_action)
+        obs, _, metrics, familiarity = self._transition(d, touch, regions, extended, touch, regions, zero_action,
+                                                        jnp.zeros(regions.shape, jnp.float32))
         metrics = dict(metrics, reward_terms=jnp.zeros_like(metrics["reward_terms"]), nan_reset=jnp.zeros(()))
-        info = {"prev_touch": touch, "prev_regions": regions, "rng": jnp.zeros((2,), jnp.uint32)}
+        info = {"prev_touch": touch, "prev_regions": regions, "familiarity": familiarity,
+                "rng": jnp.zeros((2,), jnp.uint32)}
         return State(data=d, obs=obs, reward=jnp.zeros(()), done=jnp.zeros(()), metrics=metrics, info=info)
 
     def reset(self, rng: jax.Array) -> State:
@@ -134,14 +140,15 @@ class SelfTouchEnv:
         # A diverged env must not poison the batch: its outputs are zeroed, its state is restored to
         # the settled start and the episode ends, so an auto-reset wrapper starts it afresh.
         touch, regions, extended = self.sense(d)
-        obs, reward, metrics = self._transition(d, touch, regions, extended, state.info["prev_touch"],
-                                                state.info["prev_regions"], action)
+        obs, reward, metrics, familiarity = self._transition(d, touch, regions, extended, state.info["prev_touch"],
+                                                             state.info["prev_regions"], action,
+                                                             state.info["familiarity"])
         d = self._restore_start(d, bad)
-        obs, reward, touch = (jnp.where(bad, 0.0, x) for x in (obs, reward, touch))
+        obs, reward, touch, familiarity = (jnp.where(bad, 0.0, x) for x in (obs, reward, touch, familiarity))
         metrics = {k: jnp.where(bad, 0.0, v) for k, v in metrics.items()}
         regions = regions & ~bad
         metrics["nan_reset"] = bad.astype(jnp.float32)
-        info = dict(state.info, prev_touch=touch, prev_regions=regions)
+        info = dict(state.info, prev_touch=touch, prev_regions=regions, familiarity=familiarity)
         return state.replace(data=d, obs=obs, reward=reward, done=bad.astype(jnp.float32), metrics=metrics,
                              info=info)
 

@@ -34,7 +34,7 @@ import numpy as np
 from mjx_protamer.envs import sensing
 from mjx_protamer.envs.config import REWARD_TERMS, EnvConfig
 from mjx_protamer.envs.model import arm_speed, build_model, observe
-from mjx_protamer.envs.reward import reward_terms
+from mjx_protamer.envs.reward import habituate, reward_terms
 
 
 def native_contacts(m: mujoco.MjModel, d: mujoco.MjData):
@@ -75,6 +75,7 @@ class SelfTouchTwinEnv(gym.Env):
         self._steps = 0
         self._prev_touch = np.zeros(4 * (self.config.k + 3))
         self._prev_regions = np.zeros(sensing.N_REGIONS, bool)
+        self._familiarity = np.zeros(sensing.N_REGIONS)
 
     # --- physics state ------------------------------------------------------------------------------
     def _set_start_state(self) -> None:
@@ -105,33 +106,37 @@ class SelfTouchTwinEnv(gym.Env):
         return sensing.sense(np, self._tables, self.config.k, geom, pos, dist, normal,
                              self.data.geom_xpos, self.data.geom_xmat.reshape(-1, 3, 3))
 
-    def signals(self, prev_touch=None, prev_regions=None, action=None) -> dict[str, Any]:
+    def signals(self, prev_touch=None, prev_regions=None, action=None, familiarity=None) -> dict[str, Any]:
         """Everything the env derives from the current physics state (float64), as the MJX env does.
 
         prev_touch / prev_regions default to this state's own (novelty 0, region term stale), the
-        action to zeros. Returns obs, reward, reward_terms, touch, region_mask, extended_region_mask,
-        self_contact, arm_speed.
+        action to zeros, the familiarity trace before this step to zeros. Returns obs, reward,
+        reward_terms, touch, region_mask, extended_region_mask, self_contact, arm_speed, familiarity (after).
         """
         d = self.data
         touch, regions, extended = self.sense()
         prev_touch = touch if prev_touch is None else np.asarray(prev_touch, np.float64)
         prev_regions = regions if prev_regions is None else np.asarray(prev_regions, bool)
         action = np.zeros(self.action_size) if action is None else np.asarray(action, np.float64)
+        familiarity = np.zeros(len(regions)) if familiarity is None else np.asarray(familiarity, np.float64)
+        habituating = self.config.habituation_s > 0
+        after = habituate(np, familiarity, regions, self.config.familiarity_rates()) if habituating else familiarity
         speed = arm_speed(np, self.model, d.qvel)
         terms = reward_terms(np, self.config.reward, touch, prev_touch, regions, prev_regions, speed,
-                             d.actuator_force, action)
-        obs = observe(np, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz)
+                             d.actuator_force, action, familiarity if habituating else None)
+        obs = observe(np, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz,
+                      after if habituating else None)
         return {
             "obs": obs, "reward": float(terms @ self._weights), "reward_terms": terms, "touch": touch,
             "region_mask": regions, "extended_region_mask": extended,
-            "self_contact": float(np.any(regions)), "arm_speed": float(speed),
+            "self_contact": float(np.any(regions)), "arm_speed": float(speed), "familiarity": after,
         }
 
     def evaluate_state(self, qpos, qvel, ctrl, qacc_warmstart=None, act=None, prev_touch=None,
-                       prev_regions=None, action=None) -> dict[str, Any]:
+                       prev_regions=None, action=None, familiarity=None) -> dict[str, Any]:
         """`set_state` then `signals`: the equivalence tests' entry point (see tests/env)."""
         self.set_state(qpos, qvel, ctrl, qacc_warmstart, act)
-        return self.signals(prev_touch, prev_regions, action)
+        return self.signals(prev_touch, prev_regions, action, familiarity)
 
     def _bad_state_warnings(self) -> tuple[int, ...]:
         w = self.data.warning
@@ -158,7 +163,7 @@ class SelfTouchTwinEnv(gym.Env):
                        self.model.start_warmstart[i])
         s = self.signals()
         s["reward_terms"] = np.zeros_like(s["reward_terms"])
-        self._prev_touch, self._prev_regions = s["touch"], s["region_mask"]
+        self._prev_touch, self._prev_regions, self._familiarity = s["touch"], s["region_mask"], s["familiarity"]
         self._steps = 0
         return s["obs"].astype(np.float32), self._info(s, False)
 
@@ -176,8 +181,10 @@ class SelfTouchTwinEnv(gym.Env):
                or not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))))
         if bad:
             self._set_start_state()
-        s = self.signals(self._prev_touch, self._prev_regions, action)
-        self._prev_touch, self._prev_regions = s["touch"], s["region_mask"]
+        s = self.signals(self._prev_touch, self._prev_regions, action, self._familiarity)
+        if bad:  # the MJX env zeroes a diverged step's outputs; its episode ends either way
+            s["familiarity"] = np.zeros_like(s["familiarity"])
+        self._prev_touch, self._prev_regions, self._familiarity = s["touch"], s["region_mask"], s["familiarity"]
         self._steps += 1
         truncated = bad or self._steps >= self.config.episode_length
         return s["obs"].astype(np.float32), s["reward"], False, truncated, self._info(s, bad)

@@ -14,7 +14,7 @@ from mjx_protamer.config import ConfigError, load_config
 from mjx_protamer.envs import body
 from mjx_protamer.envs.config import EnvConfig, RewardConfig
 from mjx_protamer.envs.model import build_model
-from mjx_protamer.envs.reward import reward_terms
+from mjx_protamer.envs.reward import habituate, reward_terms
 from mjx_protamer.envs.sensing import sense
 from mjx_protamer.envs.touch import build_touch_tables
 
@@ -125,7 +125,7 @@ def test_reward_terms_match_hand_computed_values():
     torque = np.array([1.0, -2.0])
     action = np.array([0.9, -1.0, 0.5])
     terms = reward_terms(np, cfg, touch, prev, regions, np.array([True, False, False]), 2.0, torque, action)
-    expected = [4 * math.tanh(0.05 * 4.0), math.sqrt(0 + 4 + 4), 0.3, 0.0, -0.001 * 5, -0.8 * (0.1 + 0.2)]
+    expected = [4 * math.tanh(0.05 * 4.0), math.sqrt(0 + 4 + 4), 0.3, 0.0, -0.001 * 5, -0.8 * (0.1 + 0.2), 0.0]
     np.testing.assert_allclose(terms, expected, rtol=1e-12)
     # Same regions as before (a subset): -1; too slow and too fast: -0.5 each.
     stale = reward_terms(np, cfg, touch, prev, regions, regions, 0.5, torque, action)
@@ -151,6 +151,34 @@ def test_infant_reward_pays_for_touching_not_pressing_hand_computed():
     assert by_hand > 1.0 and novelty == 1.0
     small = reward_terms(np, cfg, np.array([0.1, 0, 0]), z, z > 0, z > 0, 2.0, z, z)[1]
     assert small == pytest.approx(math.tanh(0.1))
+
+
+def test_habituation_pays_for_unfamiliar_regions_and_familiarity_recovers_hand_computed():
+    """A region touched for 1 s at habituation_s 0.5 s is 1 - e^-2 familiar; the term pays 1 - familiarity
+    per touched region; 5 s untouched at recovery_s 5 s leaves e^-1 of it."""
+    env = EnvConfig(habituation_s=0.5, recovery_s=5.0)
+    on, off = env.familiarity_rates()
+    assert on == pytest.approx(math.exp(-0.005 / 0.5)) and off == pytest.approx(math.exp(-0.005 / 5.0))
+    head = np.zeros(8, bool)
+    head[3] = True
+    f = np.zeros(8)
+    for _ in range(200):  # 1 s on the head
+        f = habituate(np, f, head, (on, off))
+    np.testing.assert_allclose(f, np.where(head, 1 - math.exp(-2.0), 0.0), rtol=1e-9)
+    both = head.copy()
+    both[0] = True  # the head again, and the hip for the first time
+    z = np.zeros(3)
+    term = reward_terms(np, RewardConfig(), z, z, both, both, 2.0, z, np.zeros(14), f)[6]
+    assert term == pytest.approx(math.exp(-2.0) + 1.0)
+    for _ in range(1000):  # 5 s touching nothing
+        f = habituate(np, f, np.zeros(8, bool), (on, off))
+    assert f[3] == pytest.approx((1 - math.exp(-2.0)) * math.exp(-1.0), rel=1e-9)
+    # Without a trace the term is 0, and the paper's preset does not weigh it.
+    assert reward_terms(np, RewardConfig(), z, z, both, both, 2.0, z, np.zeros(14))[6] == 0.0
+    assert RewardConfig.preset("paper").habituation == 0.0
+    assert EnvConfig(habituation_s=0.5).observation_size == EnvConfig().observation_size + 8
+    with pytest.raises(ConfigError, match="habituation_s"):
+        load_config(EnvConfig, None, ["habituation_s=-1"])
 
 
 def test_reward_preset_by_name_in_a_config(tmp_path):

@@ -32,7 +32,10 @@ def native_env():
 
     # A short action filter (20 ms): the low-pass is exercised on every step, and held random targets are
     # still reached within their 25 steps, so the trajectory makes enough self-contacts to compare.
-    return NativeSelfTouchEnv(EnvConfig(reset_noise_steps=0, action_filter_s=0.02))
+    # Habituation on a 50 ms / 100 ms scale: the familiarity trace in the observation and the reward moves
+    # within the compared steps.
+    return NativeSelfTouchEnv(EnvConfig(reset_noise_steps=0, action_filter_s=0.02, habituation_s=0.05,
+                                        recovery_s=0.1))
 
 
 def _held_actions(seed, steps, hold=25):
@@ -141,7 +144,7 @@ def test_trajectory_equals_the_twin(native_env, native_roll, seed):
     obs0_j, (obs_j, qpos_j, rew_j, reg_j, nan_j) = native_roll(jax.random.PRNGKey(seed), actions)
     obs0_t, _ = twin.reset(seed=0)
     np.testing.assert_allclose(obs0_j, obs0_t, atol=1e-5)
-    contact_steps = 0
+    contact_steps, familiar = 0, 0.0
     for t, a in enumerate(actions):
         o, r, _, _, info = twin.step(a)
         np.testing.assert_allclose(qpos_j[t], twin.data.qpos, rtol=1e-6, atol=1e-6, err_msg=f"step {t}")
@@ -154,8 +157,10 @@ def test_trajectory_equals_the_twin(native_env, native_roll, seed):
         np.testing.assert_allclose(rew_j[t], r, atol=1e-3 * max(1.0, abs(r)), err_msg=f"step {t}")
         np.testing.assert_array_equal(reg_j[t], info["region_mask"], err_msg=f"step {t}")
         contact_steps += bool(info["self_contact"])
+        familiar = max(familiar, float(o[-8:].max()))  # the familiarity trace ends the observation
     assert not nan_j.any()
     assert contact_steps >= 5, f"only {contact_steps} steps with a self-contact: the comparison saw too little"
+    assert familiar > 0.5, f"familiarity reached only {familiar}: the habituation trace was not compared"
 
 
 def test_one_step_agrees_with_mjx_at_the_converged_solver(eq_mjx_env, eq_twin):
@@ -253,7 +258,7 @@ def test_episode_limit_truncates_and_auto_resets(batched_native):
 
     env, reset, step = batched_native
     state = reset(jax.random.split(jax.random.PRNGKey(1), 2))
-    assert state.obs.shape == (2, env.observation_size) == (2, 86)  # 84 + the oscillator
+    assert state.obs.shape == (2, env.observation_size) == (2, 94)  # 84 + the oscillator + 8 familiarities
     for _ in range(3):
         state = step(state, jnp.ones((2, 14)) * 0.3)
     assert state.done.tolist() == [1.0, 1.0] and state.info["truncation"].tolist() == [1.0, 1.0]

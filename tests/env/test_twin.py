@@ -47,7 +47,7 @@ def test_seed_fixes_trajectory(twin):
     assert not np.array_equal(a[0], c[0]), "different seeds should start from different states"
     assert set(info) >= {"reward_terms", "self_contact", "region_mask", "extended_region_mask", "arm_speed",
                          "nan_reset"}
-    assert info["reward_terms"].shape == (6,) and info["region_mask"].shape == (8,)
+    assert info["reward_terms"].shape == (7,) and info["region_mask"].shape == (8,)
     assert info["extended_region_mask"].shape == (4,)
 
 
