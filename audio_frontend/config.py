@@ -160,8 +160,7 @@ class FillerGateConfig:
     followed by an end, and when the best candidate's log-probability per token is within `margin` of
     the best transcript's, the word is not trusted ("Damn." for a "hmm"). Candidates are the hums and
     the neutral vowel only: the open interjections (oh, ah, eh) are near real words ("no", "awful", "oh
-    no") and cost right answers on the dev voices (docs/voice.md). Before that, the acoustic check
-    (`open_vowel`): a sound that is one open vowel with no consonant is a filler whatever was written."""
+    no") and cost right answers on the dev voices (docs/voice.md)."""
 
     enabled: bool = True
     margin: float = 1.0                 # mean token log-probability below the best transcript's
@@ -169,14 +168,6 @@ class FillerGateConfig:
     # Only transcripts of at most this many words are checked (a filler is one syllable; Whisper made up
     # to three words of one on the dev voices); null: all. Keeps the extra decoder pass off sentences.
     max_words: int | None = 3
-    # The acoustic check (audio_frontend/filler_acoustics.py): a signed short transcript of a sound that is
-    # one open vowel with no consonant (a loudness dip below `vowel_max_dip_db` and F1 never down to
-    # `vowel_min_f1_hz` in voiced frames) is a filler, whatever Whisper wrote ("Yeah." for espeak's
-    # Scottish "er", with every filler 2-3 below: Whisper's own evidence cannot catch it). Every keyword
-    # has a consonant. Chosen on dev voices (docs/voice.md); false: off.
-    open_vowel: bool = True
-    vowel_max_dip_db: float = 1.0
-    vowel_min_f1_hz: float = 400.0
 
     def validate(self) -> None:
         check(0.0 <= self.margin <= 10.0, "margin",
@@ -184,10 +175,6 @@ class FillerGateConfig:
         check(bool(self.candidates), "candidates", "must name at least one filler (or set enabled: false)")
         check(all(len(c.split()) == 1 and c.strip() for c in self.candidates), "candidates", "must be single words")
         check(self.max_words is None or self.max_words >= 1, "max_words", "must be >= 1, or null for no limit")
-        check(0.0 < self.vowel_max_dip_db <= 30.0, "vowel_max_dip_db",
-              "must be within (0, 30] dB (a loudness dip inside the utterance)")
-        check(100.0 <= self.vowel_min_f1_hz <= 1500.0, "vowel_min_f1_hz",
-              "must be within 100..1500 Hz (a first formant)")
 
 
 @dataclasses.dataclass(frozen=True)

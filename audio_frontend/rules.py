@@ -5,13 +5,9 @@ Pure Python; the classifier is any callable `text -> (label, score)`.
 
 from __future__ import annotations
 
-import dataclasses
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
-
-if TYPE_CHECKING:
-    from audio_frontend.filler_acoustics import VowelShape
+from typing import Callable
 
 _BRACKETS = re.compile(r"[\[\(\*][^\]\)\*]*[\]\)\*]")   # Whisper's [BLANK_AUDIO], (music), *cough*
 _WORD = re.compile(r"[a-z0-9']+")
@@ -69,8 +65,6 @@ class RuleDecision:
     alternative: str | None = None   # rule "alternative": the beam hypothesis whose keywords decided
     # the filler gate's evidence when it was asked: (most likely filler, its mean token log-probability)
     filler: tuple[str, float] | None = None
-    # its acoustic evidence when measured: (loudness dip dB, lowest F1 Hz), `filler_acoustics.VowelShape`
-    vowel: tuple[float, float] | None = None
     # rule "filler_like": the value the words would have given
     gated_value: float | None = None
 
@@ -164,8 +158,7 @@ class RuleLayer:
     def decide(self, transcript: str, classify: Callable[[str], tuple[str, float]] | None,
                avg_logprob: float | None = None,
                alternatives: tuple[tuple[str, float | None], ...] = (),
-               filler_logprob: Callable[[tuple[str, ...]], tuple[str, float]] | None = None,
-               vowel_shape: Callable[[], VowelShape] | None = None) -> RuleDecision:
+               filler_logprob: Callable[[tuple[str, ...]], tuple[str, float]] | None = None) -> RuleDecision:
         """`avg_logprob`: the recogniser's mean token log-probability, when it gives one; below
         `min_avg_logprob` the transcript is too unsure to give feedback. `alternatives`: the recogniser's
         other hypotheses `(text, avg_logprob)`; when the transcript has words but nothing decides (the
@@ -174,32 +167,21 @@ class RuleLayer:
         likely is kept; the classifier is never asked about an alternative. `filler_logprob(candidates)`:
         the recogniser's (filler, mean token log-probability) of the most likely filler as the whole
         transcript; a signed decision on a short transcript is dropped when that filler is within the
-        filler gate's margin of `avg_logprob` (rule "filler_like"). `vowel_shape()`: the sound's
-        `filler_acoustics.VowelShape`; before that, a signed short transcript of one open vowel with no
-        consonant is dropped (rule "filler_like", whatever the recogniser's scores)."""
+        filler gate's margin of `avg_logprob` (rule "filler_like")."""
         d = self._decide_words(transcript, classify, avg_logprob, alternatives)
-        return self._gate(d, avg_logprob, filler_logprob, vowel_shape)
+        return self._gate(d, avg_logprob, filler_logprob)
 
-    def _gate(self, d: RuleDecision, avg_logprob: float | None, filler_logprob, vowel_shape) -> RuleDecision:
-        """The filler gate: a sign is kept only if the sound is not one open vowel and no hesitation filler
-        is nearly as likely a transcript. The acoustic check goes first: it is cheaper than the forced decode
-        and needs no scores from the recogniser."""
+    def _gate(self, d: RuleDecision, avg_logprob: float | None, filler_logprob) -> RuleDecision:
+        """The filler gate: a sign is kept only if no hesitation filler is nearly as likely a transcript."""
         g = self.filler_gate
-        if g is None or d.value == 0 or (g.max_words is not None and len(d.words) > g.max_words):
+        if (g is None or d.value == 0 or filler_logprob is None or avg_logprob is None
+                or (g.max_words is not None and len(d.words) > g.max_words)):
             return d
-        vowel = None
-        if g.open_vowel and vowel_shape is not None:
-            shape = vowel_shape()
-            vowel = (float(shape.dip_db), float(shape.f1_min_hz))
-            if shape.is_open_vowel(g.vowel_max_dip_db, g.vowel_min_f1_hz):
-                return dataclasses.replace(d, value=0.0, rule="filler_like", vowel=vowel, gated_value=d.value)
-        if filler_logprob is None or avg_logprob is None:
-            return dataclasses.replace(d, vowel=vowel)
         word, lp = filler_logprob(tuple(g.candidates))
         if lp >= avg_logprob - g.margin:
-            return dataclasses.replace(d, value=0.0, rule="filler_like", filler=(word, float(lp)), vowel=vowel,
-                                       gated_value=d.value)
-        return dataclasses.replace(d, filler=(word, float(lp)), vowel=vowel)
+            return RuleDecision(0.0, "filler_like", d.words, d.label, d.score, d.alternative, (word, float(lp)),
+                                gated_value=d.value)
+        return RuleDecision(d.value, d.rule, d.words, d.label, d.score, d.alternative, (word, float(lp)))
 
     def _decide_words(self, transcript: str, classify, avg_logprob: float | None,
                       alternatives: tuple[tuple[str, float | None], ...]) -> RuleDecision:

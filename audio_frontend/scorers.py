@@ -141,22 +141,18 @@ class WhisperScorer:
         return self.classifier(text)
 
     def score(self, audio: np.ndarray) -> tuple[float, dict]:
-        from audio_frontend.filler_acoustics import lazy_vowel_shape
         from audio_frontend.models import transcript_of
 
         t0 = time.perf_counter()
-        x = np.asarray(audio, dtype=np.float32)
-        tr = transcript_of(self.transcriber, x)
+        tr = transcript_of(self.transcriber, np.asarray(audio, dtype=np.float32))
         t1 = time.perf_counter()
         d = self.rules.decide(tr.text, self.classify if self.classifier is not None else None, tr.avg_logprob,
-                              tr.alternatives, tr.filler_logprob, lazy_vowel_shape(x, self.sample_rate, tr.timings))
+                              tr.alternatives, tr.filler_logprob)
         t2 = time.perf_counter()
         return d.value, {"transcript": tr.text, "rule": d.rule, "alternative": d.alternative,
                          "label": d.label, "label_score": d.score,
                          "filler": d.filler[0] if d.filler else None,
                          "filler_logprob": d.filler[1] if d.filler else None, "gated_value": d.gated_value,
-                         "vowel_dip_db": d.vowel[0] if d.vowel else None,
-                         "vowel_f1_min_hz": d.vowel[1] if d.vowel else None,
                          "avg_logprob": tr.avg_logprob, "no_speech_prob": tr.no_speech_prob,
                          "sentiment": self.sentiment_name, "asr_model": self.cfg.asr.model,
                          "asr_backend": self.cfg.asr.backend, "asr_s": t1 - t0, **tr.timings,

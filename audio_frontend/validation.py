@@ -12,7 +12,6 @@ import time
 from pathlib import Path
 
 from audio_frontend.errors import AudioInputError
-from audio_frontend.filler_acoustics import lazy_vowel_shape
 from audio_frontend.labelled import LABELS_FILE, Scored, find_labelled, load_labelled, score_loaded
 from audio_frontend.models import transcript_of
 from audio_frontend.report import summarize
@@ -51,7 +50,7 @@ def calibrate_speaker(cfg, calib_dir: Path) -> dict:
     return feature_calibration(samples, cfg.prosody)
 
 
-def _whisper_rows(loaded, transcriber, rules, classifiers: dict, sample_rate: int) -> dict[str, list[Scored]]:
+def _whisper_rows(loaded, transcriber, rules, classifiers: dict) -> dict[str, list[Scored]]:
     """Transcribe each file once, decide with every sentiment classifier."""
     out: dict[str, list[Scored]] = {name: [] for name in classifiers}
     for path, lab, utt in loaded:
@@ -62,13 +61,12 @@ def _whisper_rows(loaded, transcriber, rules, classifiers: dict, sample_rate: in
         t0 = time.perf_counter()
         tr = transcript_of(transcriber, utt.audio)
         asr_s = time.perf_counter() - t0
-        vowel = lazy_vowel_shape(utt.audio, sample_rate, tr.timings)   # measured once, when a gate asks
         for name, clf in classifiers.items():
             t1 = time.perf_counter()
-            d = rules.decide(tr.text, clf, tr.avg_logprob, tr.alternatives, tr.filler_logprob, vowel)
+            d = rules.decide(tr.text, clf, tr.avg_logprob, tr.alternatives, tr.filler_logprob)
             out[name].append(Scored(str(path), lab, d.value, asr_s + time.perf_counter() - t1,
                                     {"transcript": tr.text, "rule": d.rule, "alternative": d.alternative,
-                                     "avg_logprob": tr.avg_logprob, "filler": d.filler, "vowel": d.vowel,
+                                     "avg_logprob": tr.avg_logprob, "filler": d.filler,
                                      "gated_value": d.gated_value, **tr.timings},
                                     speech_s=utt.speech_s, vad_wait_s=utt.vad_wait_s))
     return out
@@ -105,7 +103,7 @@ def validate_speakers(root: str | Path, cfg, scorers=("prosody", "whisper"), log
             mine["prosody"] = score_loaded(load_labelled(files, cfg), scorer.score)
         if whisper is not None:
             files, _ = find_labelled(test, "words")
-            mine.update(_whisper_rows(load_labelled(files, cfg), *whisper, cfg.audio.sample_rate))
+            mine.update(_whisper_rows(load_labelled(files, cfg), *whisper))
         per_speaker[spk.name] = {}
         for name, rows in mine.items():
             pooled.setdefault(name, []).extend(rows)

@@ -266,55 +266,6 @@ def test_the_filler_gate_is_asked_only_about_short_signed_transcripts(rules):
     assert wide.decide("Yes, that was great.", never, -1.0, (), asked).rule == "filler_like"
 
 
-class Shape:
-    """A sound's measured shape (`filler_acoustics.VowelShape`), counting how often it is measured."""
-
-    def __init__(self, dip_db, f1_min_hz):
-        from audio_frontend.filler_acoustics import VowelShape
-
-        self.shape, self.calls = VowelShape(dip_db, f1_min_hz, 0.0), 0
-
-    def __call__(self):
-        self.calls += 1
-        return self.shape
-
-
-def test_the_filler_gate_drops_a_sign_on_one_open_vowel_whatever_the_recogniser_says(rules):
-    """espeak's Scottish "er" is heard "Yeah." with every filler 2-3 below: Whisper's evidence keeps the
-    sign, but the sound is one open vowel (no loudness dip of vowel_max_dip_db 1.0 dB, F1 never down to
-    vowel_min_f1_hz 400 Hz): rule filler_like, before the forced decode is asked. A consonant in the sound
-    (a dip: "okay"; a low F1: the [j] of "yeah", the [n] of "no") keeps the sign, and the forced
-    decode is asked as before."""
-    far = FillerScores("mm", -3.3)
-    er = Shape(0.3, 455.0)
-    d = rules.decide("Yeah.", never, -0.4, (), far, er)
-    assert (d.value, d.rule, d.gated_value, d.vowel, d.filler) == (0, "filler_like", 1, (0.3, 455.0), None)
-    assert far.calls == [] and er.calls == 1
-    for dip, f1 in ((0.3, 310.0), (1.5, 455.0), (0.0, float("nan"))):     # glide, closure, nothing voiced
-        d = rules.decide("Yeah.", never, -0.4, (), far, Shape(dip, f1))
-        assert (d.value, d.rule, d.filler) == (1, "keyword", ("mm", -3.3)), (dip, f1)
-        assert d.vowel[0] == dip
-    # a consonant in the sound, and a filler nearly as likely: the forced decode still drops it
-    d = rules.decide("Damn.", lambda t: ("NEGATIVE", 0.5), -1.3, (), FillerScores("hmm", -1.8), Shape(0.2, 250.0))
-    assert (d.value, d.rule, d.gated_value, d.filler, d.vowel) == (0, "filler_like", -1, ("hmm", -1.8), (0.2, 250.0))
-    # without recogniser scores (another backend) the acoustic check still holds
-    assert rules.decide("Yeah.", never, None, (), None, Shape(0.3, 455.0)).rule == "filler_like"
-
-
-def test_the_open_vowel_check_is_measured_only_where_the_gate_is_asked(rules):
-    shape = Shape(0.0, 700.0)
-    assert rules.decide("Um...", never, -1.0, (), None, shape).rule == "filler"
-    assert rules.decide("Look at the hand.", neutral, -1.0, (), None, shape).value == 0
-    assert rules.decide("Yes, that was great.", never, -1.0, (), None, shape).value == 1      # 4 words
-    assert shape.calls == 0
-    off = RuleLayer.from_config(voice_config("sentiment.filler_gate.open_vowel=false").sentiment)
-    d = off.decide("Yeah.", never, -0.4, (), FillerScores("mm", -3.3), shape)
-    assert (d.value, d.vowel, shape.calls) == (1, None, 0)
-    loose = RuleLayer.from_config(voice_config("sentiment.filler_gate.vowel_max_dip_db=2.0",
-                                               "sentiment.filler_gate.vowel_min_f1_hz=300").sentiment)
-    assert loose.decide("No.", never, -0.4, (), None, Shape(1.5, 320.0)).rule == "filler_like"
-
-
 def test_the_filler_gate_config_is_checked():
     with pytest.raises(ConfigError,
                        match=r"sentiment\.filler_gate\.candidates.*\['yeah'\] are not in sentiment\.fillers"):
@@ -323,7 +274,3 @@ def test_the_filler_gate_config_is_checked():
         voice_config("sentiment.filler_gate.margin=-1")
     with pytest.raises(ConfigError, match=r"sentiment\.filler_gate\.max_words"):
         voice_config("sentiment.filler_gate.max_words=0")
-    with pytest.raises(ConfigError, match=r"sentiment\.filler_gate\.vowel_max_dip_db"):
-        voice_config("sentiment.filler_gate.vowel_max_dip_db=0")
-    with pytest.raises(ConfigError, match=r"sentiment\.filler_gate\.vowel_min_f1_hz"):
-        voice_config("sentiment.filler_gate.vowel_min_f1_hz=4000")
