@@ -115,10 +115,10 @@ class EnvConfig:
     # The reward's `habituation` term pays for touching unfamiliar regions, and the trace is appended to
     # the observation so the critic can see what it pays for. Infants habituate to a repeated touch and
     # recover from it (docs/experiments.md); the spec's region term pays any onset, so one region
-    # tapped or pressed forever earns as much as a tour of the body. 0 switches it off (the paper's obs,
-    # and the field's value in configs written before it existed).
-    habituation_s: float = 0.0
-    recovery_s: float = 5.0
+    # tapped or pressed forever earns as much as a tour of the body. 0 switches it off (the paper's
+    # obs; run_loader reads a saved run that predates the field as 0).
+    habituation_s: float = 0.25
+    recovery_s: float = 10.0
     reset_noise_steps: int = 10
     reset_noise_scale: float = 0.1
     reset_pool_size: int = 256

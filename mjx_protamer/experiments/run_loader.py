@@ -34,18 +34,29 @@ def resolve_checkpoint(path: str | Path) -> tuple[Path, Path, int | None]:
     raise CheckpointError(f"{path} is not {WHAT} (no {CONFIG_NAME} found)")
 
 
+def read_run_config(run_dir: Path):
+    """The PretrainConfig a run was saved with. A run saved before `env.habituation_s` existed had no
+    familiarity trace in its observation, so the missing field reads as 0 there, not as today's default."""
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.config import from_dict, read_raw
+
+    raw = read_raw(run_dir / CONFIG_NAME)
+    env = raw.get("env")
+    if isinstance(env, dict) and "habituation_s" not in env:
+        raw["env"] = dict(env, habituation_s=0.0)
+    return from_dict(PretrainConfig, raw)
+
+
 def load_run(path: str | Path):
     """(config, env, train state, step) of a saved run; the state is restored onto one device."""
     import jax
 
-    from mjx_protamer.agents.ddpg.config import PretrainConfig
     from mjx_protamer.agents.ddpg.train import make_train
-    from mjx_protamer.config import load_config
     from mjx_protamer.experiments import checkpoints
     from mjx_protamer.experiments.env_factory import make_env
 
     run_dir, ckpt_dir, step = resolve_checkpoint(path)
-    config = load_config(PretrainConfig, run_dir / CONFIG_NAME)
+    config = read_run_config(run_dir)
     steps = checkpoints.available_steps(ckpt_dir)
     if not steps:
         raise CheckpointError(f"no checkpoint in {ckpt_dir}: the run stopped before its first one "

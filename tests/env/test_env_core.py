@@ -176,7 +176,7 @@ def test_habituation_pays_for_unfamiliar_regions_and_familiarity_recovers_hand_c
     # Without a trace the term is 0, and the paper's preset does not weigh it.
     assert reward_terms(np, RewardConfig(), z, z, both, both, 2.0, z, np.zeros(14))[6] == 0.0
     assert RewardConfig.preset("paper").habituation == 0.0
-    assert EnvConfig(habituation_s=0.5).observation_size == EnvConfig().observation_size + 8
+    assert EnvConfig(habituation_s=0.5).observation_size == EnvConfig(habituation_s=0.0).observation_size + 8
     with pytest.raises(ConfigError, match="habituation_s"):
         load_config(EnvConfig, None, ["habituation_s=-1"])
 
@@ -201,7 +201,7 @@ def test_config_errors_name_the_field(tmp_path):
     path = tmp_path / "env.yaml"
     path.write_text("k: 6\nreward:\n  energy: 0.0\n")
     cfg = load_config(EnvConfig, path)
-    assert cfg.k == 6 and cfg.observation_size == 4 * 9 + 32 + 2 and cfg.reward.weights()[4] == 0.0  # + oscillator
+    assert cfg.k == 6 and cfg.observation_size == 4 * 9 + 32 + 2 + 8 and cfg.reward.weights()[4] == 0.0  # + oscillator, familiarities
 
 
 def test_body_model_facts(model):
@@ -257,7 +257,7 @@ def test_episode_limit_truncates_and_auto_resets(batched):
 
     env, _, reset, step = batched
     state = reset(jax.random.split(jax.random.PRNGKey(1), 2))
-    assert state.obs.shape == (2, env.observation_size) == (2, 84 + 2)  # + the oscillator's phase
+    assert state.obs.shape == (2, env.observation_size) == (2, 84 + 2 + 8)  # + the oscillator, the familiarities
     actions = jnp.ones((2, 14)) * 0.3
     for t in range(3):
         state = step(state, actions)
@@ -293,3 +293,21 @@ def test_fixed_length_tuple_fields_load(tmp_path):
         from_dict(Point, {"xyz": [1, "b", 3]})
     with pytest.raises(ConfigError, match="expected 3 items"):
         from_dict(Point, {"xyz": [1, 2]})
+
+
+def test_a_run_saved_before_habituation_loads_without_it(tmp_path):
+    """Saved runs list every field; one written before `habituation_s` existed had an 86-dim observation,
+    so its checkpoint needs the trace off, while a run saved today keeps its own value."""
+    import yaml
+
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.config import to_dict
+    from mjx_protamer.experiments.run_loader import read_run_config
+
+    saved = to_dict(PretrainConfig())
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
+    assert read_run_config(tmp_path).env.habituation_s == 0.25
+    del saved["env"]["habituation_s"]
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
+    old = read_run_config(tmp_path)
+    assert old.env.habituation_s == 0.0 and old.env.observation_size == 84 + 2

@@ -21,7 +21,7 @@ def test_check_env_passes(twin):
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*infinity.*")  # unbounded observation Box: intended
         check_env(twin, skip_render_check=True)
-    assert twin.observation_space.shape == (84 + 2,) and twin.observation_space.dtype == np.float32
+    assert twin.observation_space.shape == (84 + 2 + 8,) and twin.observation_space.dtype == np.float32
     assert twin.action_space.shape == (14,) and twin.action_space.dtype == np.float32
     assert (twin.action_space.low == -1).all() and (twin.action_space.high == 1).all()
 
