@@ -50,19 +50,20 @@ def eq_mjx_evaluate(eq_mjx_env):
     env = eq_mjx_env
 
     @jax.jit
-    def evaluate(qpos, qvel, ctrl, warmstart, prev_touch, prev_regions, action):
+    def evaluate(qpos, qvel, ctrl, warmstart, prev_touch, prev_regions, action, familiarity):
         d = env.init_data.replace(qpos=qpos, qvel=qvel, ctrl=ctrl, qacc_warmstart=warmstart)
         d = mjx.forward(env.mjx_model, d)
         touch, regions, extended = env.sense(d)
-        obs, reward, metrics = env._transition(d, touch, regions, extended, prev_touch, prev_regions, action)
+        obs, reward, metrics, _ = env._transition(d, touch, regions, extended, prev_touch, prev_regions, action,
+                                                  familiarity)
         geom, _, dist, normal = env.contacts(d)
         return dict(obs=obs, reward=reward, touch=touch, region_mask=regions, extended_region_mask=extended,
                     metrics=metrics, geom=geom, dist=dist, normal=normal)
 
-    def call(qpos, qvel, ctrl, warmstart, prev_touch, prev_regions, action):
+    def call(qpos, qvel, ctrl, warmstart, prev_touch, prev_regions, action, familiarity=np.zeros(8)):
         f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
         out = evaluate(f32(qpos), f32(qvel), f32(ctrl), f32(warmstart), f32(prev_touch),
-                       jnp.asarray(prev_regions, bool), f32(action))
+                       jnp.asarray(prev_regions, bool), f32(action), f32(familiarity))
         return jax.tree.map(np.asarray, out)
 
     return call

@@ -102,12 +102,14 @@ def _compare(twin, mjx_eval, states):
     names = twin.reward_term_names
     cfg = twin.config.reward
     prev_n = prev_m = None
+    familiarity = np.linspace(0.0, 0.9, 8)  # a habituation trace that differs per region
     for j, (qpos, qvel, ctrl, ws, action) in enumerate(states):
         pn = (np.zeros(4 * BLOCK), np.zeros(8, bool)) if prev_n is None else prev_n
         pm = (np.zeros(4 * BLOCK), np.zeros(8, bool)) if prev_m is None else prev_m
-        nat = twin.evaluate_state(qpos, qvel, ctrl, ws, prev_touch=pn[0], prev_regions=pn[1], action=action)
+        nat = twin.evaluate_state(qpos, qvel, ctrl, ws, prev_touch=pn[0], prev_regions=pn[1], action=action,
+                                  familiarity=familiarity)
         ng, _, ndist, _ = native_contacts(twin.mj_model, twin.data)
-        mx = mjx_eval(qpos, qvel, ctrl, ws, pm[0], pm[1], action)
+        mx = mjx_eval(qpos, qvel, ctrl, ws, pm[0], pm[1], action, familiarity)
         prev_n = (nat["touch"], nat["region_mask"])
         prev_m = (mx["touch"], mx["region_mask"])
         tables = twin.model.sensing
@@ -143,7 +145,7 @@ def _compare(twin, mjx_eval, states):
         close("arm_speed", met["arm_speed"], nat["arm_speed"], 1e-5, 1e-5)
         tn_terms, tm_terms = nat["reward_terms"], met["reward_terms"]
         tol = {"contact": (1e-2, 1e-2), "novelty": (1e-2, 1e-2), "region": (1e-6, 0.0), "movement": (1e-6, 0.0),
-               "energy": (1e-5, 1e-4), "joint_limit": (1e-6, 0.0)}
+               "energy": (1e-5, 1e-4), "joint_limit": (1e-6, 0.0), "habituation": (1e-6, 0.0)}
         edge = min(abs(nat["arm_speed"] - cfg.speed_low), abs(nat["arm_speed"] - cfg.speed_high)) < 1e-4
         for i, name in enumerate(names):
             if name == "movement" and edge:
@@ -179,14 +181,17 @@ def test_state_touching_with_all_four_hand_geoms(eq_twin, eq_mjx_evaluate, sweep
     compared, skipped, _, failures = _compare(eq_twin, eq_mjx_evaluate, [state])
     assert compared == 1 and not failures, (skipped, failures)
     qpos, qvel, ctrl, ws, action = state
-    nat = eq_twin.evaluate_state(qpos, qvel, ctrl, ws, action=action)
-    mx = eq_mjx_evaluate(qpos, qvel, ctrl, ws, nat["touch"], nat["region_mask"], action)
+    familiarity = np.linspace(0.0, 0.9, 8)
+    nat = eq_twin.evaluate_state(qpos, qvel, ctrl, ws, action=action, familiarity=familiarity)
+    mx = eq_mjx_evaluate(qpos, qvel, ctrl, ws, nat["touch"], nat["region_mask"], action, familiarity)
     blocks = {"s_left palm": slice(0, BLOCK), "s_left fingers": slice(BLOCK, 2 * BLOCK),
               "s_right palm": slice(2 * BLOCK, 3 * BLOCK), "s_right fingers": slice(3 * BLOCK, 4 * BLOCK),
               "s_qpos": slice(4 * BLOCK, 4 * BLOCK + 12), "s_qvel": slice(4 * BLOCK + 12, 4 * BLOCK + 24),
               "s_torque": slice(4 * BLOCK + 24, 4 * BLOCK + 32)}
+    np.testing.assert_allclose(mx["obs"][-8:], nat["obs"][-8:], atol=1e-6)
     for side, obs in (("native", nat["obs"]), ("mjx", mx["obs"])):
-        assert obs.shape == (84 + 2,)  # the paper's 84, then the oscillator's phase
+        assert obs.shape == (84 + 2 + 8,)  # the paper's 84, the oscillator's phase, the regions' familiarity
+        assert np.all(obs[-7:] > 0), f"{side}: the familiarity block is zero"
         for name, sl in blocks.items():
             assert np.any(obs[sl] != 0), f"{side}: observation block {name} is all zeros"
             if "palm" in name or "fingers" in name:
