@@ -34,3 +34,44 @@ def test_update_flops_counts_the_paper_networks():
     a3 = 84 * 400 + 400 * 300 + 300 * 200 + 200 * 14
     c3 = 84 * 400 + 414 * 300 + 300 * 200 + 200
     assert update_flops(84, 14, (400, 300, 200), (400, 300, 200), 64) == 2 * 64 * (4 * a3 + 7 * c3)
+
+
+def test_update_dot_shapes_are_the_matmuls_autodiff_lowers():
+    """The roofline's matmul list is the update's: the critic loss's and the actor loss's value-and-grad and
+    the targets, lowered by JAX, contain exactly these dot shapes (as a multiset, lhs and rhs transposes
+    aside), so a change to the networks or the losses that the list misses fails here."""
+    import collections
+    import re
+
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_protamer.agents.ddpg import losses
+    from mjx_protamer.agents.ddpg.networks import Actor, Critic
+    from mjx_protamer.agents.ddpg.replay import Transition
+    from mjx_protamer.experiments.bench_train import update_dot_shapes
+
+    obs_n, act_n, batch = 86, 14, 64
+    actor, critic = Actor(action_size=act_n), Critic()
+    ap = actor.init(jax.random.PRNGKey(0), jnp.zeros((obs_n,)))
+    cp = critic.init(jax.random.PRNGKey(1), jnp.zeros((obs_n,)), jnp.zeros((act_n,)))
+    b = Transition(jnp.zeros((batch, obs_n)), jnp.zeros((batch, act_n)), jnp.zeros((batch, 3)),
+                   jnp.zeros((batch, obs_n)), jnp.zeros((batch,)))
+
+    def update(ap, cp, b):
+        next_q = critic.apply(cp, b.next_obs, actor.apply(ap, b.next_obs))
+        target = losses.td_target(jnp.zeros((batch,)), next_q, b.terminal, 0.99)
+        (_, _), c_grads = jax.value_and_grad(losses.critic_loss, has_aux=True)(cp, critic.apply, b, target)
+        a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(ap, actor.apply, cp, critic.apply, b.obs, 1.0, 2.0)
+        return c_grads, a_grads, a_loss
+
+    text = jax.jit(update).lower(ap, cp, b).as_text()
+    lowered = collections.Counter()
+    for lhs, rhs, out in re.findall(r"stablehlo\.dot_general.*?\(tensor<([\dx]+)xf32>, tensor<([\dx]+)xf32>\) "
+                                    r"-> tensor<([\dx]+)xf32>", text):
+        lhs, rhs, out = ([int(v) for v in t.split("x")] for t in (lhs, rhs, out))
+        contracted = (lhs[0] * lhs[1] * rhs[0] * rhs[1] // (out[0] * out[1])) ** 0.5
+        lowered[tuple(sorted((out[0], out[1]))) + (round(contracted),)] += 1
+    listed = collections.Counter(tuple(sorted((m, n))) + (k,)
+                                 for m, k, n in update_dot_shapes(obs_n, act_n, (400, 300), (400, 300), batch))
+    assert lowered == listed
