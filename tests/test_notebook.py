@@ -11,6 +11,6 @@ def test_walkthrough_twin_cells_run(capsys):
     namespace: dict = {}
     for cell in cells[:2]:  # the twin cells; the third compiles MJX
         exec(compile("".join(cell["source"]), str(NOTEBOOK), "exec"), namespace)
-    assert namespace["obs"].shape == (84 + 2,)  # the paper's 84, then the oscillator's phase
+    assert namespace["obs"].shape == (84 + 2 + 8,)  # the paper's 84, the oscillator's phase, the familiarity
     assert namespace["contact_steps"] > 0, "held random poses should touch the body"
     assert namespace["touched"].any()
