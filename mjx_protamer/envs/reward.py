@@ -7,7 +7,7 @@ learner can redo at sample time (relabelling) from the stored terms.
 
 from __future__ import annotations
 
-from mjx_protamer.envs.config import RewardConfig
+from mjx_protamer.envs.config import EnvConfig, RewardConfig
 
 
 def habituate(xp, familiarity, regions, rates):
@@ -18,6 +18,14 @@ def habituate(xp, familiarity, regions, rates):
     """
     touched_keep, untouched_keep = rates
     return xp.where(regions, 1.0 - (1.0 - familiarity) * touched_keep, familiarity * untouched_keep)
+
+
+def familiarity_signals(xp, env: EnvConfig, familiarity, regions):
+    """(the trace the habituation term reads, the trace after this step, which the observation shows);
+    (None, None) with habituation off. The one place both envs decide it."""
+    if env.habituation_s <= 0:
+        return None, None
+    return familiarity, habituate(xp, familiarity, regions, env.familiarity_rates())
 
 
 def reward_terms(xp, cfg: RewardConfig, touch, prev_touch, regions, prev_regions, arm_speed, torque, action,

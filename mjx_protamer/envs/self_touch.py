@@ -16,7 +16,7 @@ from mjx_protamer.envs import body, sensing
 from mjx_protamer.envs.base import State
 from mjx_protamer.envs.config import REWARD_TERMS, EnvConfig
 from mjx_protamer.envs.model import arm_speed, build_model, observe
-from mjx_protamer.envs.reward import habituate, reward_terms
+from mjx_protamer.envs.reward import familiarity_signals, reward_terms
 
 
 class SelfTouchEnv:
@@ -99,12 +99,11 @@ class SelfTouchEnv:
     def _transition(self, d, touch, regions, extended, prev_touch, prev_regions, action, familiarity):
         """Observation, reward, metrics and the familiarity trace after this step (zeros without habituation)."""
         speed = arm_speed(jnp, self.model, d.qvel)
-        habituating = self.config.habituation_s > 0
-        after = habituate(jnp, familiarity, regions, self.config.familiarity_rates()) if habituating else familiarity
+        read, after = familiarity_signals(jnp, self.config, familiarity, regions)
         terms = reward_terms(jnp, self.config.reward, touch, prev_touch, regions, prev_regions, speed,
-                             d.actuator_force, action, familiarity if habituating else None)
+                             d.actuator_force, action, read)
         obs = observe(jnp, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz,
-                      after if habituating else None)
+                      after)
         metrics = {
             "reward_terms": terms,
             "self_contact": jnp.any(regions).astype(jnp.float32),
@@ -112,7 +111,7 @@ class SelfTouchEnv:
             "extended_region_mask": extended.astype(jnp.float32),
             "arm_speed": speed,
         }
-        return obs, terms @ self._weights, metrics, after
+        return obs, terms @ self._weights, metrics, familiarity if after is None else after
 
     # --- the env API ----------------------------------------------------------------------------
     def _start_state(self, d: mjx.Data) -> State:

@@ -34,7 +34,7 @@ import numpy as np
 from mjx_protamer.envs import sensing
 from mjx_protamer.envs.config import REWARD_TERMS, EnvConfig
 from mjx_protamer.envs.model import arm_speed, build_model, observe
-from mjx_protamer.envs.reward import habituate, reward_terms
+from mjx_protamer.envs.reward import familiarity_signals, reward_terms
 
 
 def native_contacts(m: mujoco.MjModel, d: mujoco.MjData):
@@ -119,13 +119,13 @@ class SelfTouchTwinEnv(gym.Env):
         prev_regions = regions if prev_regions is None else np.asarray(prev_regions, bool)
         action = np.zeros(self.action_size) if action is None else np.asarray(action, np.float64)
         familiarity = np.zeros(len(regions)) if familiarity is None else np.asarray(familiarity, np.float64)
-        habituating = self.config.habituation_s > 0
-        after = habituate(np, familiarity, regions, self.config.familiarity_rates()) if habituating else familiarity
+        read, after = familiarity_signals(np, self.config, familiarity, regions)
         speed = arm_speed(np, self.model, d.qvel)
         terms = reward_terms(np, self.config.reward, touch, prev_touch, regions, prev_regions, speed,
-                             d.actuator_force, action, familiarity if habituating else None)
+                             d.actuator_force, action, read)
         obs = observe(np, self.model, touch, d.qpos, d.qvel, d.actuator_force, d.time, self.config.oscillator_hz,
-                      after if habituating else None)
+                      after)
+        after = familiarity if after is None else after
         return {
             "obs": obs, "reward": float(terms @ self._weights), "reward_terms": terms, "touch": touch,
             "region_mask": regions, "extended_region_mask": extended,
