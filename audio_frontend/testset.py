@@ -45,7 +45,9 @@ JITTER = {"pitch": 6, "speed": 12, "amplitude": 15}
 # "aitch-em", "uhm" as "oom". Those are said with phonemes ([[...]]): a held hum, "h" into a hum, a schwa
 # into a hum. Before this, Whisper heard the spelled "em-em" as "Yeah man..." or "Amen", which is what
 # was said, not a filler misheard.
-SAID_AS = {"mm": "[[m:m:]]", "mmm": "[[m:m:m:]]", "hm": "[[hm:m:]]", "uhm": "[[@m:]]"}
+# "er" is said as a steady long [əː] ([[@2:]], the same vowel in every voice): en-gb-scotland says "er" as a
+# glide [e]->[ɐ], "yeah" without its [j], a word rather than a hesitation (Whisper writes "Yeah."; docs/voice.md).
+SAID_AS = {"mm": "[[m:m:]]", "mmm": "[[m:m:m:]]", "hm": "[[hm:m:]]", "uhm": "[[@m:]]", "er": "[[@2:]]"}
 
 
 def plan(split: int, against: bool) -> list[dict]:

@@ -71,6 +71,39 @@ def test_synthesised_fillers_are_one_syllable_not_spelled_letters():
         assert "," not in said and said.count("'") <= 1, (word, said)
 
 
+def test_synthesised_hesitation_vowels_hold_one_vowel_in_every_voice():
+    """The phoneme check above cannot see a glide: en-gb-scotland's "er" is one stressed phoneme ('3:) that
+    it says as [e]->[ɐ], "yeah" without the [j] (F2 falls ~190 Hz in the filler style, ~370 Hz neutral).
+    The set's hesitation vowels must hold one vowel (F2 of the last third of the voiced part within 100 Hz
+    of the first third; steady vowels measure 0-40 Hz) in every voice, in both styles fillers are said in."""
+    from voice_helpers import SR, need_synth
+
+    need_synth()
+    parselmouth = pytest.importorskip("parselmouth")
+    from audio_frontend.synth import synthesize
+    from audio_frontend.testset import SAID_AS, SPEAKERS, TONE_STYLE
+
+    def f2_drift(x, female):
+        snd = parselmouth.Sound(x.astype(np.float64), SR)
+        pitch = snd.to_pitch(time_step=0.01)
+        voiced = pitch.xs()[pitch.selected_array["frequency"] > 0]
+        # Praat's rule of thumb: formant ceiling 5000 Hz for a male voice, 5500 Hz for a female one
+        formants = snd.to_formant_burg(time_step=0.01, max_number_of_formants=5,
+                                       maximum_formant=5500 if female else 5000)
+        f2 = np.array([formants.get_value_at_time(2, t) for t in voiced])
+        third = len(f2) // 3
+        assert third >= 5, "too short to measure"
+        return abs(np.nanmedian(f2[-third:]) - np.nanmedian(f2[:third]))
+
+    glide = f2_drift(synthesize("er", "neutral", SR, voice="en-gb-scotland+m7"), female=False)
+    assert glide > 200, glide                                     # what the measure is for
+    for word in ("uh", "er"):
+        for voice in SPEAKERS:
+            for style in (TONE_STYLE["fillers"], TONE_STYLE["neu"]):
+                drift = f2_drift(synthesize(SAID_AS.get(word, word), style, SR, voice=voice), "+f" in voice)
+                assert drift < 100, (word, voice, style, drift)
+
+
 def test_per_speaker_calibration_hears_tone_on_unseen_sentences(small_set):
     from audio_frontend.labelled import find_labelled, load_labelled
     from audio_frontend.scorers import FeatureProsodyScorer
