@@ -20,9 +20,10 @@ Sources of the presets (each number is an assumption from the literature or a me
 - speech confusion: the measured outcome rates of Whisper tiny.en (10 s encoder window padded with silence,
   beam 5, keywords of the other hypotheses within 1.0, the filler gate) + rules + VADER (rows intended +1,
   0, -1; columns recognised +1, 0, -1; the 0 row pools neutral sentences and fillers), on the set
-  regenerated with fillers said as fillers (`synth-voice` 2026-12-02; espeak had spelled "mm" as "em-em").
-- both latencies were measured on a 2-core machine shared with other jobs (load average about 3.5): scoring
-  is slower there than on an idle machine; the VAD's wait (0.35 s median) is not. Whisper's includes the
+  regenerated with fillers said as fillers (`synth-voice` 2026-12-02; espeak had spelled "mm" as "em-em" and
+  its Scottish voice glided "er" into "yeah").
+- both latencies were measured on a 2-core machine shared with other jobs (load average 2-3.2): scoring
+  is slower there than on an idle machine; the VAD's wait (0.355 s median) is not. Whisper's includes the
   filler gate's forced decode on short signed transcripts.
 Synthesised voices are not real recordings: real speech will differ, and a person's own delays more so.
 """
@@ -43,10 +44,10 @@ PRESETS = {
     # reaction delay mean/std/min (s), utterance duration (s), processing latency (s), prosody noise, speech confusion
     "keyboard": dict(delay_mean_s=0.35, delay_std_s=0.1, delay_min_s=0.15, duration_s=0.0, latency_s=0.0,
                      noise_std=0.0, confusion=(1, 0, 0, 0, 1, 0, 0, 0, 1)),
-    "prosody": dict(delay_mean_s=0.6, delay_std_s=0.2, delay_min_s=0.25, duration_s=0.865, latency_s=0.360,
+    "prosody": dict(delay_mean_s=0.6, delay_std_s=0.2, delay_min_s=0.25, duration_s=0.865, latency_s=0.365,
                     noise_std=1.06, confusion=(1, 0, 0, 0, 1, 0, 0, 0, 1)),
-    "speech": dict(delay_mean_s=0.8, delay_std_s=0.25, delay_min_s=0.3, duration_s=0.865, latency_s=0.540,
-                   noise_std=0.0, confusion=(72 / 84, 11 / 84, 1 / 84, 1 / 36, 33 / 36, 2 / 36, 0 / 84, 9 / 84, 75 / 84)),
+    "speech": dict(delay_mean_s=0.8, delay_std_s=0.25, delay_min_s=0.3, duration_s=0.865, latency_s=0.528,
+                   noise_std=0.0, confusion=(72 / 84, 12 / 84, 0 / 84, 0 / 36, 34 / 36, 2 / 36, 1 / 84, 8 / 84, 75 / 84)),
 }
 MEASURED_IN = "docs/results/voice_channels.json"  # where the prosody and speech measurements come from
 
