@@ -339,7 +339,9 @@ def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, fe
 
     train = dataclasses.replace(pre.train, num_envs=1, chunk_steps=chunk_steps, warmup_env_steps=0,
                                 total_env_steps=max(pre.train.total_env_steps, chunk_steps), num_devices=1)
-    ddpg = dataclasses.replace(pre.ddpg, replay_size=max(pre.ddpg.batch_size, 20_000, chunk_steps))
+    # a session is open-ended: the full step size, whatever decay the pretraining run's budget had
+    ddpg = dataclasses.replace(pre.ddpg, replay_size=max(pre.ddpg.batch_size, 20_000, chunk_steps),
+                               lr_final_fraction=1.0)
     config = FeedbackRunConfig(pretrain=dataclasses.replace(pre, train=train, ddpg=ddpg),
                                feedback=dataclasses.replace(fb, watch_env=0))
     run = TamerRun(config, env, feedback=feedback_mode, queue=queue, log_path=out / "feedback.jsonl")

@@ -17,6 +17,8 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
     [
         ("ddpg.tau=0", "ddpg.tau"),
         ("ddpg.gamma=1.0", "ddpg.gamma"),
+        ("ddpg.lr_final_fraction=0", "ddpg.lr_final_fraction"),
+        ("ddpg.lr_decay_from=1.0", "ddpg.lr_decay_from"),
         ("ddpg.batch_size=0", "ddpg.batch_size"),
         ("ddpg.replay_size=10", "ddpg.replay_size"),
         ("ddpg.critic_hidden=[400]", "ddpg.critic_hidden"),

@@ -181,3 +181,29 @@ def test_chunk_emits_the_transitions_it_stores_and_train_chunk_does_not_pay_for_
     assert traj_bytes <= extra_out <= traj_bytes + 8 * len(steps)  # + one tuple slot per emitted field
     assert mem_train.temp_size_in_bytes < traj_bytes <= mem_collect.temp_size_in_bytes + traj_bytes
     assert mem_train.temp_size_in_bytes <= mem_collect.temp_size_in_bytes
+
+
+def test_step_size_decay_scales_the_update_and_leaves_the_start_alone():
+    """`lr_final_fraction`: Adam's step is linear in its rate, so the decayed run's first update is the constant
+    run's scaled by the schedule at that iteration (the critic's exactly: same params, batch and Adam state);
+    before `lr_decay_from` nothing differs."""
+    base = tiny_config(total_env_steps=44, warmup_env_steps=40, chunk_steps=11, updates_per_step=1)  # 1 update
+
+    def moved(final, decay_from):
+        config = dataclasses.replace(base, ddpg=dataclasses.replace(base.ddpg, lr_final_fraction=final,
+                                                                      lr_decay_from=decay_from))
+        trainer = make_train(config, PointReachEnv())
+        start = trainer.init(jax.random.PRNGKey(0))
+        before = jax.device_get((start.critic_params, start.actor_params))
+        end, _ = trainer.train_chunk(start, None)
+        return jax.tree.map(lambda a, b: np.asarray(a) - b, (end.critic_params, end.actor_params), before)
+
+    const, decayed, late = moved(1.0, 0.5), moved(0.5, 0.0), moved(0.5, 0.99)
+    scale = 1.0 - (10 / 11) * 0.5  # the update runs at iteration 10 of 11
+    for c, d in zip(jax.tree.leaves(const[0]), jax.tree.leaves(decayed[0])):
+        np.testing.assert_allclose(d, scale * c, rtol=1e-4, atol=1e-9)
+    ratio = [np.linalg.norm(d) / np.linalg.norm(c) for c, d in zip(jax.tree.leaves(const[1]),
+                                                                   jax.tree.leaves(decayed[1]))]
+    assert np.allclose(ratio, scale, rtol=0.05), ratio  # the actor's, against the (scaled) new critic
+    for c, d in zip(jax.tree.leaves(const), jax.tree.leaves(late)):  # the decay starts after iteration 10
+        np.testing.assert_array_equal(c, d)

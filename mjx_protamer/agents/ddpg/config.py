@@ -54,9 +54,18 @@ class DDPGConfig:
     reward_beta: float = 0.1
     actor_preact_coef: float = 0.0  # penalty on the actor's pre-tanh activations (losses.actor_loss)
     actor_preact_free: float = 0.0  # pre-tanh magnitude the penalty leaves free (0: a pull toward 0 everywhere)
+    # Step-size decay over a run (actor and critic): 1 until `lr_decay_from` of the run's iterations, then
+    # linear to `lr_final_fraction` of the rate at the last one. 1.0 = constant (the paper). A fine-tuning
+    # session is open-ended and always runs at the full rate (commands/feedback.py).
+    lr_final_fraction: float = 1.0
+    lr_decay_from: float = 0.5
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
+        check(0.0 < self.lr_final_fraction <= 1.0, "lr_final_fraction",
+              f"must be in (0, 1] (1 = a constant step size), got {self.lr_final_fraction}")
+        check(0.0 <= self.lr_decay_from < 1.0, "lr_decay_from",
+              f"must be in [0, 1) (the share of the run before the decay starts), got {self.lr_decay_from}")
         check(len(self.actor_hidden) >= 1 and min(self.actor_hidden) > 0, "actor_hidden",
               f"needs at least one positive layer width, got {self.actor_hidden}")
         check(len(self.critic_hidden) >= 2 and min(self.critic_hidden) > 0, "critic_hidden",

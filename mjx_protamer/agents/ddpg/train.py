@@ -184,7 +184,17 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             episode_return=jnp.zeros((local_envs,)),
         ))
 
-    def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params):
+    def _step_scale(iteration):
+        """The step-size multiplier at `iteration` (`DDPGConfig.lr_final_fraction`): 1 until `lr_decay_from` of
+        the run, then linear to the final fraction at its last iteration. Adam's step is linear in its
+        learning rate, so scaling the update is the scheduled rate, and the optimizer state keeps its shape."""
+        if dc.lr_final_fraction >= 1.0:
+            return jnp.float32(1.0)
+        start = dc.lr_decay_from * tc.iterations
+        progress = jnp.clip((iteration - start) / max(tc.iterations - start, 1.0), 0.0, 1.0)
+        return (1.0 - progress * (1.0 - dc.lr_final_fraction)).astype(jnp.float32)
+
+    def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params, scale):
         """One DDPG update from a fresh minibatch: critic, then actor against the new critic, then targets."""
         batch = replay.sample(buffer, local_key(key), local_batch)
         reward = losses.relabel(batch, weights, dc.reward_alpha, dc.reward_beta, human_reward_fn, human_params)
@@ -194,13 +204,13 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         (c_loss, q_mean), c_grads = jax.value_and_grad(losses.critic_loss, has_aux=True)(
             lr.critic_params, critic.apply, batch, target_q)
         c_updates, critic_opt_state = critic_opt.update(pmean(c_grads), lr.critic_opt_state, lr.critic_params)
-        critic_params = optax.apply_updates(lr.critic_params, c_updates)
+        critic_params = optax.apply_updates(lr.critic_params, jax.tree.map(lambda u: u * scale, c_updates))
 
         a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(
             lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs, dc.actor_preact_coef,
             dc.actor_preact_free)
         a_updates, actor_opt_state = actor_opt.update(pmean(a_grads), lr.actor_opt_state, lr.actor_params)
-        actor_params = optax.apply_updates(lr.actor_params, a_updates)
+        actor_params = optax.apply_updates(lr.actor_params, jax.tree.map(lambda u: u * scale, a_updates))
 
         new = Learner(
             actor_params=actor_params,
@@ -212,13 +222,13 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         )
         return new, jnp.stack([c_loss, a_loss, q_mean, jnp.mean(reward)])
 
-    def _updates(lr: Learner, key, buffer, human_params):
+    def _updates(lr: Learner, key, buffer, human_params, scale):
         def body(lr, k):
-            return _update(lr, k, buffer, human_params)
+            return _update(lr, k, buffer, human_params, scale)
         lr, stats = jax.lax.scan(body, lr, jax.random.split(key, tc.updates_per_step))
         return lr, jnp.sum(stats, axis=0), jnp.float32(tc.updates_per_step)
 
-    def _no_updates(lr: Learner, key, buffer, human_params):
+    def _no_updates(lr: Learner, key, buffer, human_params, scale):
         return lr, jnp.zeros((4,)), jnp.float32(0.0)
 
     def _env_step(ts: TrainState, k_noise, k_random):
@@ -259,7 +269,8 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         if tc.updates_per_step > 0:
             learn = ts.iteration >= warmup_iterations
             lr, update_stats, n_updates = jax.lax.cond(
-                learn, _updates, _no_updates, _learner(ts), k_update, ts.replay, human_params)
+                learn, _updates, _no_updates, _learner(ts), k_update, ts.replay, human_params,
+                _step_scale(ts.iteration))
             ts = _with_learner(ts, lr)
         else:
             update_stats, n_updates = jnp.zeros((4,)), jnp.float32(0.0)
