@@ -319,6 +319,26 @@ def seed_stats(values) -> dict:
             "seed_std": float(v.std(ddof=1)) if n > 1 else None}
 
 
+def contrast(baseline, values) -> dict:
+    """A feedback condition's metric against the baseline's on the same seeds.
+
+    `beyond_ci95_sum`: the difference of the means exceeds the sum of the two 95% half-widths (issue 8's
+    criterion; it ignores that both runs of a seed start from the same networks, envs and noise).
+    `paired`: the per-seed differences with their own mean and 95% half-width (a paired t interval over the
+    seeds, valid because the seeds are independent of each other); `paired_beyond_zero` when that interval
+    excludes 0."""
+    base, cond = seed_stats(baseline), seed_stats(values)
+    if base["mean"] is None or cond["mean"] is None or base["ci95"] is None or cond["ci95"] is None:
+        return {"difference": None, "ci95_sum": None, "beyond_ci95_sum": None, "paired": None,
+                "paired_beyond_zero": None}
+    diffs = [None if a is None or b is None else b - a for a, b in zip(baseline, values)]
+    paired = seed_stats(diffs)
+    return {"difference": cond["mean"] - base["mean"], "ci95_sum": base["ci95"] + cond["ci95"],
+            "beyond_ci95_sum": bool(cond["mean"] - base["mean"] > base["ci95"] + cond["ci95"]),
+            "paired": paired,
+            "paired_beyond_zero": None if paired["ci95"] is None else bool(paired["mean"] - paired["ci95"] > 0)}
+
+
 def _write_training_csv(rows: list[dict], path: Path) -> None:
     keys: list[str] = []
     for r in rows:
@@ -348,8 +368,13 @@ def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> di
         entry["train_wall_s"] = float(np.sum(wall[c.name]))
         conds[c.name] = entry
     tc = cfg.pretrain.train
+    baseline = next((c.name for c in cfg.conditions if c.channel == "none"), None)
+    versus = {c.name: contrast(conds[baseline]["teacher_score"]["seed_values"],
+                               conds[c.name]["teacher_score"]["seed_values"])
+              for c in cfg.conditions if baseline is not None and c.channel != "none"}
     return {
         "conditions": conds,
+        "teacher_score_vs_baseline": {"baseline": baseline, "conditions": versus} if versus else None,
         "seeds": list(cfg.seeds),
         "env": cfg.pretrain.env_name,
         "reward": reward_preset_name(cfg.pretrain),
@@ -409,6 +434,17 @@ def format_markdown(summary: dict) -> str:
     for key, label in (("feedback_total", "events given (per seed)"), ("credited_rows_total", "credited rows"),
                        ("rm_updates_total", "r_hat updates")):
         lines.append(f"| {label} | " + " | ".join(f"{conds[c]['feedback'][key]:.0f}" for c in names) + " |")
+    versus = summary.get("teacher_score_vs_baseline")
+    if versus:
+        lines += ["", f"| teacher_score against {versus['baseline']} | difference of means | sum of the ci95 | "
+                      "beyond it | per-seed differences (paired mean ± ci95) |", "|---|---|---|---|---|"]
+        for c, v in versus["conditions"].items():
+            if v["difference"] is None:
+                lines.append(f"| {c} | n/a | n/a | n/a | n/a |")
+                continue
+            seeds = ", ".join("n/a" if d is None else f"{d:.2f}" for d in v["paired"]["seed_values"])
+            lines.append(f"| {c} | {v['difference']:.3f} | {v['ci95_sum']:.3f} | "
+                         f"{'yes' if v['beyond_ci95_sum'] else 'no'} | {_fmt(v['paired'])} ({seeds}) |")
     lines += ["", "Per-seed means (seeds in order):", ""]
     for metric in M.METRIC_NAMES + ("teacher_score", "r_hat_corr_test", "r_hat_corr_pooled"):
         vals = "; ".join(f"{c} " + ", ".join("n/a" if v is None else f"{v:.3g}" for v in conds[c][metric]["seed_values"])

@@ -2,6 +2,8 @@
 
 import json
 
+import numpy as np
+import pytest
 import yaml
 
 from mjx_protamer.cli import main
@@ -33,6 +35,12 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     assert all(c[n]["feedback"]["feedback_total"] > 0 for n in ("DTK", "DTW", "DTP"))
     assert len(c["DTK"]["unique_regions"]["per_episode"]) == 6
     assert c["DTP"]["paper"]["contact_rate"] == 0.915
+    versus = summary["teacher_score_vs_baseline"]
+    assert versus["baseline"] == "DDPG" and list(versus["conditions"]) == ["DTK", "DTW", "DTP"]
+    dtk = versus["conditions"]["DTK"]
+    assert dtk["paired"]["seed_values"] == pytest.approx(np.subtract(c["DTK"]["teacher_score"]["seed_values"],
+                                                                     c["DDPG"]["teacher_score"]["seed_values"]))
+    assert "| teacher_score against DDPG |" in (out / "table2.md").read_text()
     # the pooled reward-model score: every model on the same states; DDPG's model never trains
     pooled = {n: c[n]["r_hat_corr_pooled"]["seed_values"] for n in c}
     assert pooled["DDPG"] == c["DDPG"]["r_hat_corr_pooled_untrained"]["seed_values"]

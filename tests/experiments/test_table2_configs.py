@@ -1,0 +1,30 @@
+"""The shipped Table II configs load and validate, and the habituation variant differs where it says."""
+
+from pathlib import Path
+
+import pytest
+
+from mjx_protamer.agents.ddpg.config import PretrainConfig
+from mjx_protamer.config import load_config
+from mjx_protamer.experiments.table2 import load_table2_config
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+@pytest.mark.parametrize("name", ["table2.yaml", "table2_paper.yaml", "table2_habituation.yaml"])
+def test_shipped_table2_configs_load(name):
+    cfg = load_table2_config(CONFIGS / name)
+    assert cfg.conditions[0].channel == "none" and [c.name for c in cfg.conditions] == ["DDPG", "DTK", "DTW", "DTP"]
+    assert len(cfg.seeds) >= 5 or name == "table2_paper.yaml"  # the paper's single-env setting: one seed
+
+
+def test_table2_habituation_is_table2_with_the_pretraining_habituation_and_the_lateral_rule():
+    base, hab = load_table2_config(CONFIGS / "table2.yaml"), load_table2_config(CONFIGS / "table2_habituation.yaml")
+    default_env = load_config(PretrainConfig, CONFIGS / "pretrain.yaml").env
+    assert base.pretrain.env.habituation_s == 0.0
+    assert (hab.pretrain.env.habituation_s, hab.pretrain.env.recovery_s) == (default_env.habituation_s,
+                                                                            default_env.recovery_s)
+    assert hab.pretrain.ddpg == base.pretrain.ddpg and hab.pretrain.train == base.pretrain.train
+    assert hab.conditions == base.conditions and hab.seeds == base.seeds and hab.batched == base.batched
+    assert [c.signal for c in hab.feedback.teacher.rule] == ["obs_norm:26:52", "obs_norm:0:26"]
+    assert [c.value for c in hab.feedback.teacher.rule] == [1.0, -1.0]
