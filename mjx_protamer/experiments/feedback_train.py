@@ -249,7 +249,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         ring = ring_add(fs.ring, c_obs, c_act, w, h)
         p, o, losses, live = reward_model_updates(apply, opt, fs.rm_params, fs.rm_opt_state, ring,
                                                   (c_obs, c_act, w, h), k_fresh, n_fresh, n_replay,
-                                                  rmc.batch_size, rmc.replay_min_rows)
+                                                  rmc.batch_size, rmc.replay_min_rows,
+                                                  rmc.balance_max if rmc.balance_signs else None)
         n_live = jnp.sum(live)
 
         # diagnostics: r_hat on the chunk's steps (all envs), and how it tracks the hidden score

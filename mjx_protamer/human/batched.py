@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from mjx_protamer.human.reward_model import weighted_loss
+from mjx_protamer.human.reward_model import balanced_weight, sign_factors, weighted_loss
 
 
 def draw_credited_steps(value, valid, lag_w, key, max_events: int, rows_per_event: int):
@@ -71,13 +71,15 @@ def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int
 
 
 def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRing", fresh_rows, key,
-                         n_fresh: int, n_replay: int, batch_size: int, replay_min_rows: int):
+                         n_fresh: int, n_replay: int, batch_size: int, replay_min_rows: int,
+                         balance_max: float | None = None):
     """`n_fresh` minibatch steps on the newly credited rows (drawn among those with weight > 0: Deep TAMER
     updates on every feedback), then `n_replay` on uniform draws from the feedback ring (none until it holds
     `replay_min_rows`). A step whose minibatch has no weight leaves params and optimiser state unchanged.
-    Returns (params, opt_state, losses (n,), live (n,))."""
+    With `balance_max`, praise and reproach weigh the same (`reward_model.sign_factors` over the ring). Returns (params, opt_state, losses (n,), live (n,))."""
     obs, action, weight, target = fresh_rows
     min_rows = min(replay_min_rows, ring.obs.shape[0])
+    factors = (1.0, 1.0) if balance_max is None else sign_factors(jnp, ring.weight, ring.target, balance_max)
 
     def step(carry, xs):
         p, o = carry
@@ -89,6 +91,7 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
         ba = jnp.where(fresh, action[fi], ring.action[ri])
         bw = jnp.where(fresh, weight[fi], ring.weight[ri] * (ring.size >= min_rows))
         bh = jnp.where(fresh, target[fi], ring.target[ri])
+        bw = balanced_weight(jnp, factors, bw, bh)
         loss, g = jax.value_and_grad(weighted_loss)(p, apply, bo, ba, bw, bh)
         u, new_o = optimizer.update(g, o, p)
         live = jnp.sum(bw) > 0

@@ -41,8 +41,15 @@ class RewardModelConfig:
     # tanh on the output: r_hat stays in [-1, 1], the labels' range, so the actor cannot find states the model
     # never saw labelled and rates above every label (measured on DTK, docs/experiments.md); False: linear
     bounded: bool = False
+    # Praise and reproach weigh the same in the loss, whatever their counts: each row's weight is scaled by
+    # (W+ + W-) / (2 W+) or / (2 W-), the stored rows' total weights by sign (at most `balance_max` x; 0 labels,
+    # the teacher's silences, keep theirs). A teacher whose learner complies praises far more than it scolds,
+    # and a model fitted to that rates the scolded states near the common +1 (measured, docs/experiments.md).
+    balance_signs: bool = False
+    balance_max: float = 10.0
 
     def validate(self) -> None:
+        check(self.balance_max >= 1, "balance_max", f"must be >= 1, got {self.balance_max}")
         check(len(self.hidden) >= 1 and min(self.hidden) > 0, "hidden",
               f"needs at least one positive layer width, got {self.hidden}")
         check(self.learning_rate > 0, "learning_rate", f"must be > 0, got {self.learning_rate}")
@@ -78,6 +85,23 @@ def reward_fn(hidden: tuple[int, ...] = (256, 256),
         return net.apply(params, obs, action)
 
     return apply
+
+
+def sign_factors(xp, weight, target, max_factor: float):
+    """(factor for rows with target < 0, factor for target > 0) from stored rows' weights (see
+    RewardModelConfig.balance_signs); 1 for both while either sign is missing."""
+    w_neg = xp.sum(xp.where(target < 0, weight, 0.0))
+    w_pos = xp.sum(xp.where(target > 0, weight, 0.0))
+    both = (w_neg > 0) & (w_pos > 0)
+    total = w_neg + w_pos
+    f = lambda w: xp.where(both, xp.clip(total / (2 * xp.where(both, w, 1.0)), 1.0 / max_factor, max_factor), 1.0)
+    return f(w_neg), f(w_pos)
+
+
+def balanced_weight(xp, factors, weight, target):
+    """`weight` of rows with label `target`, scaled by `sign_factors`' (negative, positive) factors."""
+    f_neg, f_pos = factors
+    return weight * xp.where(target < 0, f_neg, xp.where(target > 0, f_pos, 1.0))
 
 
 def weighted_loss(params, apply, obs, action, weight, target):
@@ -146,6 +170,11 @@ class RewardModel:
         self._update = jax.jit(functools.partial(_update, self.apply, self.optimizer))
 
     def _step(self, batch) -> float:
+        if self.config.balance_signs:
+            buf = self.buffer
+            factors = sign_factors(np, buf.weight[:buf.size], buf.target[:buf.size], self.config.balance_max)
+            obs, action, weight, target = batch
+            batch = (obs, action, balanced_weight(np, factors, weight, target).astype(np.float32), target)
         self.params, self.opt_state, loss = self._update(self.params, self.opt_state, *map(jnp.asarray, batch))
         self.updates += 1
         self.last_loss = float(loss)
