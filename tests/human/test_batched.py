@@ -101,3 +101,24 @@ def test_reward_model_updates_fit_the_credited_targets_in_jit():
                                             jax.random.PRNGKey(3), 5, 5, 32, 64)
     assert not np.asarray(live).any()
     jax.tree.map(lambda a, b: np.testing.assert_array_equal(a, b), same, params)
+
+
+def test_balanced_updates_in_jit_weigh_rare_reproach_like_praise():
+    """With `balance_max` the in-jit updates scale each row by its sign's factor over the ring: 1 scolded row per
+    40 praised ones (overlapping clusters) ends rated lower than without, the praised cluster still high."""
+    apply = reward_fn((32,))
+    params = RewardMLP((32,)).init(jax.random.PRNGKey(0), jnp.zeros((1, 2)), jnp.zeros((1, 1)))
+    opt = optax.adam(1e-3)
+    sign = jnp.where(jnp.arange(1640) % 41 == 40, -1.0, 1.0)
+    obs = jax.random.normal(jax.random.PRNGKey(1), (1640, 2)) + jnp.stack([2.0 * sign, 0 * sign], -1)
+    act = jnp.zeros((1640, 1))
+    rows = (obs, act, jnp.ones(1640), sign)
+    ring = ring_add(ring_init(2048, 2, 1), *rows)
+    probe = jnp.array([[-2.0, 0.0], [2.0, 0.0]])
+    rated = {}
+    for balance in (None, 10.0):
+        new, *_ = jax.jit(lambda p, o, k: reward_model_updates(apply, opt, p, o, ring, rows, k, 0, 100, 64, 64,
+                                                               balance))(params, opt.init(params), jax.random.PRNGKey(2))
+        rated[balance] = np.asarray(apply(new, probe, jnp.zeros((2, 1))))
+    assert rated[10.0][0] < rated[None][0] - 0.25, rated  # measured: -0.35 plain, -0.72 balanced
+    assert rated[10.0][1] > 0.5, rated
