@@ -76,7 +76,8 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
     """`n_fresh` minibatch steps on the newly credited rows (drawn among those with weight > 0: Deep TAMER
     updates on every feedback), then `n_replay` on uniform draws from the feedback ring (none until it holds
     `replay_min_rows`). A step whose minibatch has no weight leaves params and optimiser state unchanged.
-    With `balance_max`, praise and reproach weigh the same (`reward_model.sign_factors` over the ring). Returns (params, opt_state, losses (n,), live (n,))."""
+    With `balance_max`, praise and reproach weigh the same (`reward_model.sign_factors` over the ring).
+    Returns (params, opt_state, losses (n,), live (n,))."""
     obs, action, weight, target = fresh_rows
     min_rows = min(replay_min_rows, ring.obs.shape[0])
     factors = (1.0, 1.0) if balance_max is None else sign_factors(jnp, ring.weight, ring.target, balance_max)
