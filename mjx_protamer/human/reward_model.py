@@ -44,7 +44,7 @@ class RewardModelConfig:
     # Praise and reproach weigh the same in the loss, whatever their counts: each row's weight is scaled by
     # (W+ + W-) / (2 W+) or / (2 W-), the stored rows' total weights by sign (at most `balance_max` x; 0 labels,
     # the teacher's silences, keep theirs). A teacher whose learner complies praises far more than it scolds,
-    # and a model fitted to that rates the scolded states near the common +1 (measured, docs/experiments.md).
+    # and a model fitted to that rates the scolded states far above -1 (near 0: measured, docs/experiments.md).
     balance_signs: bool = False
     balance_max: float = 10.0
 
