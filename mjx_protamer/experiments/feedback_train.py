@@ -20,7 +20,8 @@
    chunk's own transitions, never from the DDPG replay;
    Steps whose credit window closed with no arrival (the teacher watched in silence) are drawn too
    (`batched.draw_silent_steps`, `silence_rows_per_chunk` rows) as target 0, each silent step weighing
-   `credit.silence_weight` events; the arrivals of the last H steps are carried for that;
+   `credit.silence_weight` events; the arrivals of the last H steps are carried for that (and, with
+   `credit.silence_needs_attention`, whether the teacher watched them: only steps it watched are silent);
 4. the rows go to the device feedback ring (1e4 rows, `batched.ring_add`) and the reward model takes
    `updates_per_feedback` minibatch steps on the chunk's new rows plus `chunk_steps // replay_every`
    replay minibatches (weighted squared loss, Adam, `batched.reward_model_updates`).
@@ -115,6 +116,7 @@ class CreditHistory(NamedTuple):
     obs: jax.Array  # (H, B, obs)
     action: jax.Array  # (H, B, act)
     arrived: jax.Array  # (H, B) bool: feedback reached the learner at that step (for the silent steps)
+    watching: jax.Array  # (H, B) bool: the teacher watched that step (`credit.silence_needs_attention`)
 
 
 @struct.dataclass
@@ -175,6 +177,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     n_replay = (T // rmc.replay_every if rmc.replay_every else 0) if batched.replay_updates_per_chunk < 0 \
         else batched.replay_updates_per_chunk
     S = batched.silence_rows_per_chunk
+    attention = fc.credit.silence_needs_attention  # the teacher's attention gates the silent steps
     if fc.credit.silence_weight > 0 and S == 0:
         raise ConfigError("config field 'batched.silence_rows_per_chunk': 0 draws no silent step, and "
                           f"feedback.credit.silence_weight is {fc.credit.silence_weight}; set rows > 0 or the weight 0")
@@ -200,7 +203,8 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         return FeedbackState(
             teacher=batched_teacher_init(kind_cfgs, B, dt), rm_params=p, rm_opt_state=opt.init(p),
             ring=ring_init(rmc.buffer_size, obs_size, act_size), rng=k_run, totals=jnp.zeros((5,)),
-            history=CreditHistory(jnp.zeros((H, B, obs_size)), jnp.zeros((H, B, act_size)), jnp.zeros((H, B), bool)))
+            history=CreditHistory(jnp.zeros((H, B, obs_size)), jnp.zeros((H, B, act_size)), jnp.zeros((H, B), bool),
+                                  jnp.zeros((H, B), bool)))
 
     # Per-env work runs on each device's envs; these join the devices where the replicated parts need all.
     def local_key(key):
@@ -235,9 +239,11 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         w = ok.astype(jnp.float32).reshape(-1)
         h = target.reshape(-1)
         seen_arrived = jnp.concatenate([fs.history.arrived, valid])
+        seen_watching = jnp.concatenate([fs.history.watching, out["watching"]])
         if S:  # silent steps, labelled 0 (their own key: the event draws are the same with and without)
             k_silent = jax.random.fold_in(local_key(k_lag), 1)
-            s_rel, s_b, s_ok, n_silent = draw_silent_steps(seen_arrived, active, fp.lag_w, k_silent, H, S)
+            s_rel, s_b, s_ok, n_silent = draw_silent_steps(seen_arrived, active, fp.lag_w, k_silent, H, S,
+                                                           seen_watching if attention else None)
             s_ok = s_ok & (it0 + s_rel >= 0)
             # a silent step weighs silence_w events; an event's K rows weigh 1 each, a row stands for n_silent / S
             s_w = s_ok * fp.silence_w * K * n_silent / S
@@ -279,7 +285,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         present = jnp.arange(E) < n_events
         events = {"present": present, "arrival": it0 + t_idx,
                   "env": env_ids[b_idx], "value": value[t_idx, b_idx], "about": about[t_idx, b_idx]}
-        history = CreditHistory(seen_obs[-H:], seen_act[-H:], seen_arrived[-H:])
+        history = CreditHistory(seen_obs[-H:], seen_act[-H:], seen_arrived[-H:], seen_watching[-H:])
         fs = fs.replace(teacher=teacher, rm_params=p, rm_opt_state=o, ring=ring, rng=rng, totals=totals,
                         history=history)
         return ts, fs, metrics, events
@@ -290,7 +296,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
             teacher=BatchedTeacherState(teacher=split, pending_value=split, pending_valid=split,
                                         pending_about=split, step=P()),
             rm_params=P(), rm_opt_state=P(), ring=P(), rng=P(), totals=P(),
-            history=CreditHistory(P(None, AXIS), P(None, AXIS), P(None, AXIS)))
+            history=CreditHistory(P(None, AXIS), P(None, AXIS), P(None, AXIS), P(None, AXIS)))
         chunk_fn = jax.shard_map(chunk, mesh=trainer.mesh, in_specs=(trainer.state_specs, fs_specs, P()),
                                  out_specs=(trainer.state_specs, fs_specs, P(), split), check_vma=False)
     else:

@@ -40,14 +40,16 @@ def draw_credited_steps(value, valid, lag_w, key, max_events: int, rows_per_even
     return t_idx[:, None] - lags, b_idx, ok, target, n_events
 
 
-def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int):
+def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int, watching=None):
     """Steps no feedback was about: the teacher watched and stayed silent through the step's whole credit window.
 
     `arrived` (H + T, B) bool: feedback reached the learner at that step (the carried history, then the chunk);
     `active` (B,) the env has a teacher; `lag_w` (L,) the credit weight of lag j. A step at row p can be
     credited by arrivals at rows p + j for the lags j with weight; it is silent when none arrived there. Only
     the T steps whose window closes inside this chunk are judged, so each step is judged once over a run.
-    Draws `n_rows` of them uniformly (with replacement). Returns (rel (n,) the step relative to the chunk's
+    With `watching` (H + T, B) bool, the teacher's attention, a step is silent only if the teacher watched
+    every step whose feedback could have arrived in its window (rows p + first - last .. p + last - first, for
+    the first and last lags with weight). Draws `n_rows` of them uniformly (with replacement). Returns (rel (n,) the step relative to the chunk's
     first step, negative: an earlier chunk; env (n,); ok (n,) there was a silent step to draw; n_silent, how
     many there were: a row stands for n_silent / n_rows of them).
 
@@ -65,6 +67,11 @@ def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int
     p = history_len - last + jnp.arange(T)  # rows whose window's last lag lands in this chunk
     n_arrived = counts[p + last + 1] - counts[p + first]  # arrivals at rows p + first .. p + last
     silent = (n_arrived == 0) & active[None, :] & jnp.any(has)
+    if watching is not None:
+        away = jnp.concatenate([jnp.zeros((1, B), jnp.int32), jnp.cumsum((~watching).astype(jnp.int32), axis=0)])
+        lo = jnp.clip(p + first - last, 0, HT)
+        hi = jnp.clip(p + last - first + 1, 0, HT)
+        silent = silent & (away[hi] - away[lo] == 0)
     idx = jax.random.categorical(key, jnp.where(silent.reshape(-1), 0.0, -1e30), shape=(n_rows,))
     ok = jnp.broadcast_to(jnp.any(silent), (n_rows,))
     return p[idx // B] - history_len, idx % B, ok, jnp.sum(silent)

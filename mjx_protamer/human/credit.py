@@ -49,6 +49,10 @@ class CreditConfig:
     # target 0 weighing this many events (an event's credit weights sum to 1); 0: events alone, as Deep TAMER.
     # Why: docs/experiments.md, "What the reward model learns from silence".
     silence_weight: float = 0.0
+    # a silent step is a 0 label only if the teacher watched every step whose feedback could have credited it:
+    # silence while looking away is not "nothing to say" (docs/experiments.md, "What limits r_hat"). Needs an
+    # attention signal: the simulated teachers' (not in their silent mode); live sessions have none yet.
+    silence_needs_attention: bool = False
 
     def validate(self) -> None:
         check(self.window_steps >= 1, "window_steps", f"must be >= 1, got {self.window_steps}")

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_protamer.agents.ddpg.config import PretrainConfig
-from mjx_protamer.config import check
+from mjx_protamer.config import ConfigError, check
 from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory, silence_reach_s
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
@@ -87,6 +87,9 @@ class TamerRun:
 
         self.config = config
         fc, tc = config.feedback, config.pretrain.train
+        if fc.credit.silence_needs_attention and feedback is not None:
+            raise ConfigError("config field 'feedback.credit.silence_needs_attention': this loop has no signal of "
+                              "when the teacher watches; set it false (it serves the in-jit simulated teachers)")
         self.env = env
         self.feedback = feedback
         self.use_model = feedback is not None

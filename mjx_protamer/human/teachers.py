@@ -235,7 +235,7 @@ def batched_teacher_init(configs, num_envs: int, dt: float) -> BatchedTeacherSta
 def batched_teacher(configs, dt: float, state: BatchedTeacherState, signals: jax.Array, key: jax.Array,
                     arrival: bool = True, kind=0, active=None):
     """Run a chunk: signals (T, B, C) -> (state, out) with out["value"], out["valid"], out["about"], out["score"]
-    (T, B). The one batched teacher: the in-jit training path (`experiments.feedback_train`) runs it too.
+    and out["watching"] (T, B) (the teacher speaks and is not in its silent mode: the attention signal). The one batched teacher: the in-jit training path (`experiments.feedback_train`) runs it too.
 
     `configs` is one TeacherConfig, or a tuple of them that differ only in their channel; `kind` (an index,
     may be traced) picks the channel that delivers, so every channel shares one compiled program; `active`
@@ -262,7 +262,7 @@ def batched_teacher(configs, dt: float, state: BatchedTeacherState, signals: jax
         give, score = decs[0][1].give & active, decs[0][1].score
         if not arrival:
             out = {"value": jnp.where(give, value, 0.0), "valid": give,
-                   "about": jnp.broadcast_to(s.step, (b,)), "score": score}
+                   "about": jnp.broadcast_to(s.step, (b,)), "score": score, "watching": active & ~teacher.silent}
             return s._replace(teacher=teacher, step=s.step + 1), out
         lag = jnp.clip(jnp.round((delay + extras[kind]) / dt).astype(jnp.int32), 1, d - 1)
         slot = (s.step + lag) % d
@@ -272,7 +272,7 @@ def batched_teacher(configs, dt: float, state: BatchedTeacherState, signals: jax
         pa = s.pending_about.at[rows, slot].set(jnp.where(write, s.step, s.pending_about[rows, slot]))
         now = s.step % d
         out = {"value": jnp.where(pm[:, now], pv[:, now], 0.0), "valid": pm[:, now], "about": pa[:, now],
-               "score": score}
+               "score": score, "watching": active & ~teacher.silent}
         pm = pm.at[:, now].set(False)
         return BatchedTeacherState(teacher, pv, pm, pa, s.step + 1), out
 

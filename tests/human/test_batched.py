@@ -69,6 +69,12 @@ def test_silent_steps_are_those_no_arrival_could_credit():
     none = draw_silent_steps(arrived, active, jnp.zeros(4), jax.random.PRNGKey(0), H, 8)[2]
     assert not np.asarray(none).any()  # no credit weight (DDPG alone): no teacher to be silent
 
+    # with the teacher's attention: a step is silent only if the teacher watched every step whose feedback could
+    # have arrived in its window (rows p - 1 .. p + 1 here); looking away at row 5 unmakes row 4's silence
+    watching = jnp.ones((H + T, B), bool).at[5, 0].set(False)
+    rel, env, ok, n = draw_silent_steps(arrived, active, lag_w, jax.random.PRNGKey(0), H, 200, watching)
+    assert int(n) == 1 and set(np.asarray(rel).tolist()) == {-2} and set(np.asarray(env).tolist()) == {0}
+
 
 def test_ring_keeps_only_weighted_rows_and_wraps():
     ring = ring_init(4, 1, 1)

@@ -46,6 +46,14 @@ def test_loop_smoke_events_flow_from_teacher_to_reward_model(tmp_path):
     assert run.silent_next <= run.first_step - run.silence_reach / cfg.feedback.dt + 1
 
 
+def test_the_host_loop_refuses_silences_gated_by_an_attention_signal_it_lacks():
+    from mjx_protamer.config import ConfigError
+
+    cfg = load_feedback_config(None, TOY + ["feedback.credit.silence_needs_attention=true"])
+    with pytest.raises(ConfigError, match="silence_needs_attention"):
+        TamerRun(cfg, PointReachEnv(cfg.pretrain.toy), feedback="simulated:keyboard")
+
+
 @pytest.mark.slow
 def test_tamer_with_simulated_keyboard_teacher_moves_behaviour_its_way():
     cfg = load_feedback_config(None, TOY + ["pretrain.train.total_env_steps=12000"])

@@ -55,6 +55,19 @@ def test_the_score_is_what_holds_now_and_feedback_waits_until_all_of_it_is_notic
     assert (out["value"][2:10, 0] == 1).all() and (out["value"][20:30, 0] == -1).all()
 
 
+def test_the_teacher_gives_only_while_it_watches_and_says_when_it_does():
+    """`watching` (the attention signal a learner may gate its silences with) is false exactly in the silent
+    mode, in which no feedback is given."""
+    cfg = dataclasses.replace(EXACT, silence_fraction=0.5, silence_mean_s=0.1)
+    sig = np.zeros((400, 4, 2), np.float32)
+    sig[:, :, 0] = 1.0  # always something to praise
+    out = run(cfg, sig, arrival=False)
+    assert 0.3 < out["watching"].mean() < 0.7
+    assert out["valid"][~out["watching"]].sum() == 0 and (out["valid"] == out["watching"]).all()
+    out = run(cfg, sig)  # on arrival: feedback still comes (from earlier judgements) while the teacher looks away
+    assert out["valid"][~out["watching"]].sum() > 0
+
+
 def test_keyboard_feedback_arrives_after_the_reaction_delay():
     sig = np.zeros((80, 3, 2), np.float32)
     sig[[5, 30], :, 0] = 1.0

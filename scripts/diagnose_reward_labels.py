@@ -1,0 +1,233 @@
+"""What limits the reward model: the states it is fitted on, or the labels the teacher gives (issue 8).
+
+Two steps, both on the production code paths:
+
+  collect: train one seed of a table2 condition (DTK by default) exactly as `protamer reproduce table2` does,
+           and record every chunk's steps (obs, action) and the teacher's output (value, valid, score, about)
+           through debug callbacks on `feedback_train`'s `rule_signals` and `batched_teacher`; then the test
+           episodes' states with their hidden score (`table2.evaluate_seeds`).
+           .venv/bin/python scripts/diagnose_reward_labels.py collect --config configs/table2_habituation.yaml \
+               --seed 0 --out runs/labels_seed0.npz
+  fit:     fit fresh reward models offline on the recorded run's credited and silent rows
+           (`batched.draw_credited_steps`, the silent-step rule of `batched.draw_silent_steps`, and
+           `batched.reward_model_updates`), with the teacher's labels or with labels an oracle corrected, and
+           print r_hat's correlation with the hidden score on the test states and on the last 10 chunks'
+           training states, one JSON line per variant.
+           .venv/bin/python scripts/diagnose_reward_labels.py fit runs/labels_seed{0,1,2,3,4}.npz
+
+Variants (`--variants`, comma-separated NAME:SILENCE_WEIGHT[:balanced]):
+  teacher      the teacher's labels: each event's value on its credited steps, 0 on silent steps
+  exact        the same steps, labelled with their hidden score (the states' ceiling)
+  no_mistakes  the teacher's labels without the events whose sign the teacher flipped (`flip_prob`)
+  attentive    the teacher's labels, the silent steps limited to those whose hidden score is 0 (an oracle
+               that knows when silence meant "nothing to say" rather than "not watching")
+Also printed: how many reproaches were flipped praise, and where the silent steps with score +1 lie.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+
+def collect(args) -> None:
+    from mjx_protamer.experiments import feedback_train as FT
+    from mjx_protamer.experiments import table2 as T2
+    from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
+
+    cfg = T2.load_table2_config(args.config)
+    cfg = dataclasses.replace(cfg, seeds=(args.seed,), pretrain=with_resolved_backend(cfg.pretrain, announce=True))
+    rec = {k: [] for k in ("obs", "action", "value", "valid", "score", "about")}
+    signals, teacher = FT.rule_signals, FT.batched_teacher
+
+    def recorded_signals(cols, obs, action, terms, region_mask=None, **kw):
+        jax.debug.callback(lambda o, a: (rec["obs"].append(np.asarray(o)), rec["action"].append(np.asarray(a))),
+                           obs, action)
+        return signals(cols, obs, action, terms, region_mask, **kw)
+
+    def recorded_teacher(*a, **kw):
+        state, out = teacher(*a, **kw)
+        keys = ("value", "valid", "score", "about")
+        jax.debug.callback(lambda *xs: [rec[k].append(np.asarray(x)) for k, x in zip(keys, xs)],
+                           *(out[k] for k in keys))
+        return state, out
+
+    FT.rule_signals, FT.batched_teacher = recorded_signals, recorded_teacher
+    pre = cfg.pretrain
+    env = make_env(pre)
+    ft = FT.make_feedback_train(pre, env, cfg.feedback, cfg.batched)
+    matches = [c for c in cfg.conditions if c.name == args.condition]
+    if not matches or matches[0].channel == "none":
+        sys.exit(f"error: --condition {args.condition!r} must name a feedback condition of {args.config}")
+    cond = matches[0]
+    fp = ft.params(cond.channel, dataclasses.replace(cfg.feedback.credit, scheme=cond.credit))
+    fp = fp._replace(gain=fp.gain * cond.beta_scale)
+    ts = jax.jit(ft.trainer.init)(jax.random.PRNGKey(args.seed))
+    fs = jax.jit(ft.init)(jnp.int32(args.seed))
+    untrained = jax.tree.map(np.array, fs.rm_params)  # fs is donated to the chunk
+    t0 = time.perf_counter()
+    n = pre.train.num_chunks
+    for c in range(n):
+        ts, fs, m, _ = ft.chunk(ts, fs, fp)
+        if c % 10 == 0 or c == n - 1:
+            print(f"chunk {c + 1}/{n} r_hat corr {float(m['r_hat_score_corr']):+.2f} "
+                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    jax.effects_barrier()
+    one = lambda t: jax.tree.map(lambda x: x[None], t)
+    res, sample = T2.evaluate_seeds(cfg, env, ft, one(ts.actor_params), one(fs.rm_params), one(untrained))
+    print(json.dumps({k: res[0][k] for k in ("unique_regions", "freeze_ratio", "teacher_score", "r_hat_corr_test")}))
+    np.savez_compressed(args.out, **{k: np.stack(v[:n]) for k, v in rec.items()},  # the test rollout's come after
+                        **{"test_" + k: np.asarray(v[0]) for k, v in sample.items()},
+                        lag_w=np.asarray(fp.lag_w), silence_w=float(fp.silence_w),
+                        rows_per_event=cfg.batched.rows_per_event,
+                        silence_rows_per_chunk=cfg.batched.silence_rows_per_chunk,
+                        chunk_steps=pre.train.chunk_steps)
+    print(f"saved {args.out}")
+
+
+def fit(args) -> None:
+    """Every recorded run (one per seed), then each variant's mean over them, 95% CI and per-seed values."""
+    from mjx_protamer.experiments.table2 import seed_stats
+
+    per_run = [fit_one(args, path) for path in args.data]
+    for name in per_run[0]:
+        for metric in ("r_hat_corr_test", "r_hat_corr_late_training"):
+            stats = seed_stats([run[name][metric] for run in per_run])
+            print(json.dumps({"variant": name, "metric": metric, "mean": round(stats["mean"], 3),
+                              "ci95": round(stats["ci95"], 3),
+                              "per_seed": [round(v, 3) for v in stats["seed_values"]]}), flush=True)
+
+
+def fit_one(args, path) -> dict:
+    from mjx_protamer.human.batched import FeedbackRing, draw_credited_steps, reward_model_updates
+    from mjx_protamer.human.reward_model import RewardMLP, reward_fn
+
+    d = np.load(path)
+    print(f"== {path}", flush=True)
+    flat = lambda x: x.reshape(-1, *x.shape[2:])  # (chunks, T, B, ...) -> (steps, B, ...)
+    obs, act = flat(d["obs"]), flat(d["action"])
+    value, valid, score, about = flat(d["value"]), flat(d["valid"]), flat(d["score"]), flat(d["about"]).astype(int)
+    TT, B, O = obs.shape
+    A = act.shape[-1]
+    K = int(d["rows_per_event"])
+    lag_w = np.asarray(d["lag_w"])
+
+    # the credited rows of every event, as in the chunk (K lags drawn by credit weight)
+    E = int(valid.sum())
+    rel, b_idx, ok, target, _ = map(np.asarray, draw_credited_steps(
+        jnp.asarray(value), jnp.asarray(valid), jnp.asarray(lag_w), jax.random.PRNGKey(args.seed), E, K))
+    ok = ok & (rel >= 0)
+    rel = np.clip(rel, 0, None)
+    ev_t, ev_b = np.nonzero(valid)  # the order draw_credited_steps takes events in
+    mistake = value[ev_t, ev_b] != score[np.clip(about[ev_t, ev_b], 0, TT - 1), ev_b]
+
+    # the silent steps: no arrival at any lag with credit weight (batched.draw_silent_steps)
+    first = int(np.argmax(lag_w > 0))
+    last = len(lag_w) - 1 - int(np.argmax((lag_w > 0)[::-1]))
+    arrivals = np.concatenate([np.zeros((1, B), np.int64), np.cumsum(valid, 0)])
+    p = np.arange(TT - last)
+    silent = (arrivals[p + last + 1] - arrivals[p + first]) == 0
+    n_silent = int(silent.sum())
+    S = int(d["silence_rows_per_chunk"]) * (TT // int(d["chunk_steps"]))
+    pick = np.random.default_rng(args.seed).choice(np.flatnonzero(silent.ravel()), S)
+    s_t, s_b = p[pick // B], pick % B
+
+    # where the silent steps with score +1 lie: the length of the +1 stretch around them
+    runs = np.zeros((TT, B), int)
+    for b in range(B):
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], (score[:, b] == 1).astype(int), [0]])))
+        for start, stop in zip(edges[::2], edges[1::2]):
+            runs[start:stop, b] = stop - start
+    silent_pos = silent & (score[p] == 1)
+    run_of_silent = runs[p][silent_pos]
+    neg = value[ev_t, ev_b] < 0
+    print(json.dumps({
+        "steps": TT * B, "events": E, "praise": int((~neg).sum()), "reproach": int(neg.sum()),
+        "reproach_that_was_flipped_praise": int((neg & mistake).sum()),
+        "praise_that_was_flipped_reproach": int((~neg & mistake).sum()),
+        "credited_rows_with_the_events_value_as_score": float(
+            (score[rel, b_idx[:, None]] == target)[ok].mean()),
+        "silent_steps": n_silent, "silent_steps_score_share": {
+            str(v): float((score[p][silent] == v).mean()) for v in (-1, 0, 1)},
+        "silent_plus1_steps_stretch_length_quartiles": [float(x) for x in np.percentile(run_of_silent, [25, 50, 75])],
+        "silent_plus1_steps_in_stretches_under_20_steps": float((run_of_silent < 20).mean()),
+    }), flush=True)
+
+    hidden = tuple(args.hidden)
+    apply = reward_fn(hidden, True)
+    net = RewardMLP(hidden, True)
+    test = (d["test_obs"], d["test_action"], d["test_score"])
+    late = (obs[-1000:].reshape(-1, O), act[-1000:].reshape(-1, A), score[-1000:].reshape(-1))
+    ev_obs, ev_act = obs[rel, b_idx[:, None]].reshape(-1, O), act[rel, b_idx[:, None]].reshape(-1, A)
+    ev_score = score[rel, b_idx[:, None]].reshape(-1)
+    si_obs, si_act, si_score = obs[s_t, s_b], act[s_t, s_b], score[s_t, s_b]
+
+    def corr(params, data):
+        r = np.asarray(jax.jit(apply)(params, data[0], data[1]))
+        r, s = r - r.mean(), data[2] - data[2].mean()
+        return float(np.sum(r * s) / np.sqrt(np.sum(r * r) * np.sum(s * s)))
+
+    def group_means(params, data):
+        r = np.asarray(jax.jit(apply)(params, data[0], data[1]))
+        return {str(v): round(float(r[data[2] == v].mean()), 3) for v in (-1, 0, 1) if np.any(data[2] == v)}
+
+    results = {}
+    for spec in args.variants.split(","):
+        name, w_silence, *rest = spec.split(":")
+        if name not in ("teacher", "exact", "no_mistakes", "attentive"):
+            sys.exit(f"error: variant {name!r}: use teacher, exact, no_mistakes or attentive")
+        w_ev = (ok & ~mistake[:, None]) if name == "no_mistakes" else ok
+        w_si = np.full(len(s_t), float(w_silence) * K * n_silent / S, np.float32)
+        if name == "attentive":
+            w_si = w_si * (si_score == 0)
+        h_ev = ev_score if name == "exact" else target.reshape(-1)
+        h_si = si_score if name == "exact" else np.zeros(len(s_t))
+        rows = [np.concatenate(x).astype(np.float32) for x in (
+            (ev_obs, si_obs), (ev_act, si_act), (w_ev.reshape(-1), w_si), (h_ev, h_si))]
+        keep = rows[2] > 0
+        o, a, w, h = (jnp.asarray(r[keep]) for r in rows)
+        ring = FeedbackRing(o, a, w, h, jnp.int32(0), jnp.int32(len(w)))
+        params = net.init(jax.random.PRNGKey(args.seed), jnp.zeros((1, O)), jnp.zeros((1, A)))
+        opt = optax.adam(args.learning_rate)
+        opt_state = opt.init(params)
+        balance = 10.0 if rest == ["balanced"] else None
+        block = jax.jit(lambda pr, st, k: reward_model_updates(
+            apply, opt, pr, st, ring, (o[:1], a[:1], w[:1], h[:1]), k, 0, 1000, 64, 1, balance)[:2])
+        for i in range(args.updates // 1000):
+            params, opt_state = block(params, opt_state, jax.random.PRNGKey(1000 + i))
+        results[spec] = {"r_hat_corr_test": corr(params, test), "r_hat_corr_late_training": corr(params, late)}
+        print(json.dumps({"variant": spec, **{k: round(v, 3) for k, v in results[spec].items()},
+                          "test_r_hat_by_score": group_means(params, test)}), flush=True)
+    return results
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="cmd", required=True)
+    c = sub.add_parser("collect")
+    c.add_argument("--config", default="configs/table2_habituation.yaml")
+    c.add_argument("--condition", default="DTK")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--out", required=True)
+    f = sub.add_parser("fit")
+    f.add_argument("data", nargs="+", help="the .npz of `collect`, one per seed")
+    f.add_argument("--variants", default="teacher:0.03:balanced,teacher:0.03,teacher:1,exact:1,no_mistakes:1,"
+                                         "attentive:1,attentive:0.03:balanced")
+    f.add_argument("--updates", type=int, default=10_000)
+    f.add_argument("--learning-rate", type=float, default=1e-3)
+    f.add_argument("--hidden", type=int, nargs="+", default=[256, 256])
+    f.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    collect(args) if args.cmd == "collect" else fit(args)
+
+
+if __name__ == "__main__":
+    main()
