@@ -49,9 +49,9 @@ def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int
     the T steps whose window closes inside this chunk are judged, so each step is judged once over a run.
     With `watching` (H + T, B) bool, the teacher's attention, a step is silent only if the teacher watched
     every step whose feedback could have arrived in its window (rows p + first - last .. p + last - first, for
-    the first and last lags with weight). Draws `n_rows` of them uniformly (with replacement). Returns (rel (n,) the step relative to the chunk's
-    first step, negative: an earlier chunk; env (n,); ok (n,) there was a silent step to draw; n_silent, how
-    many there were: a row stands for n_silent / n_rows of them).
+    the first and last lags with weight). Draws `n_rows` of them uniformly (with replacement). Returns (rel
+    (n,) the step relative to the chunk's first step, negative: an earlier chunk; env (n,); ok (n,) there was
+    a silent step to draw; n_silent, how many there were: a row stands for n_silent / n_rows of them).
 
     Why (Loftin et al. 2014, "Learning something from nothing"): a teacher who praises right-hand touches and
     scolds left-hand ones says nothing about the states in between, so a model fitted to events alone never

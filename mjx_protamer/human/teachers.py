@@ -235,7 +235,8 @@ def batched_teacher_init(configs, num_envs: int, dt: float) -> BatchedTeacherSta
 def batched_teacher(configs, dt: float, state: BatchedTeacherState, signals: jax.Array, key: jax.Array,
                     arrival: bool = True, kind=0, active=None):
     """Run a chunk: signals (T, B, C) -> (state, out) with out["value"], out["valid"], out["about"], out["score"]
-    and out["watching"] (T, B) (the teacher speaks and is not in its silent mode: the attention signal). The one batched teacher: the in-jit training path (`experiments.feedback_train`) runs it too.
+    and out["watching"] (T, B) (the teacher speaks and is not in its silent mode: the attention signal). The one
+    batched teacher: the in-jit training path (`experiments.feedback_train`) runs it too.
 
     `configs` is one TeacherConfig, or a tuple of them that differ only in their channel; `kind` (an index,
     may be traced) picks the channel that delivers, so every channel shares one compiled program; `active`
