@@ -507,8 +507,11 @@ def plot_regions(summary: dict, path: Path) -> Path:
 
     names = list(summary["conditions"])
     data = [summary["conditions"][n]["unique_regions"]["per_episode"] for n in names]
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.boxplot(data, showmeans=True)
+    fig, ax = plt.subplots(figsize=(6, 4.4))
+    # the box spans test episodes; its outliers are single episodes, drawn unlike the seed means' circles
+    ax.boxplot(data, showmeans=True, flierprops=dict(marker="+", markeredgecolor="grey", markersize=6))
+    ax.plot([], [], "^", color="green", label="mean of episodes")
+    ax.plot([], [], "+", color="grey", label="single episodes (box outliers)")
     ax.set_xticks(range(1, len(names) + 1), names)
     for i, n in enumerate(names, start=1):
         seed_means = summary["conditions"][n]["unique_regions"]["seed_values"]
@@ -522,7 +525,7 @@ def plot_regions(summary: dict, path: Path) -> Path:
     ax.set_ylabel("unique regions per test episode")
     ax.set_ylim(-0.3, 8.3)
     ax.grid(alpha=0.3, axis="y")
-    ax.legend(loc="upper right")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=4, fontsize=7.5, frameon=False)  # off the data
     ax.set_title(f"Figure 2 analogue ({sum(len(d) for d in data) // len(names)} test episodes per condition)")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
