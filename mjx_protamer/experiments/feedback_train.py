@@ -57,7 +57,7 @@ from mjx_protamer.config import ConfigError, check
 from mjx_protamer.human.batched import (FeedbackRing, draw_credited_steps, draw_silent_steps, reward_model_updates,
                                         ring_add, ring_init)
 from mjx_protamer.human.credit import CreditConfig, lag_weights
-from mjx_protamer.human.reward_model import RewardMLP, reward_fn
+from mjx_protamer.human.reward_model import reward_nets
 from mjx_protamer.human.teachers import (BatchedTeacherState, TeacherConfig, batched_teacher, batched_teacher_init,
                                          env_signal_columns, rule_signals, with_channel)
 
@@ -69,6 +69,12 @@ class BatchedFeedbackConfig:
     """How the in-jit feedback path is sized (the `batched` section of a feedback or table2 config)."""
 
     teach_envs: int = 0  # envs that have a teacher (the first n); 0 = every env
+    # Teachers watch only the envs that act without exploration noise (the last `ddpg.noise.quiet_fraction` of
+    # them): the behaviour the deterministic test episodes measure, as a TAMER teacher watches a greedy agent.
+    # Under noise the arms rarely stop, so a teacher of every env scolds a freeze too rarely for r_hat to learn
+    # it. Measured worse than a teacher on every env (a quarter of the events; docs/experiments.md, "Where r_hat
+    # errs on the learner's own test states"), so it is off by default.
+    teach_quiet: bool = False
     max_events_per_chunk: int = 0  # events credited per chunk (static shape); 0 = auto from num_envs and min gap
     rows_per_event: int = 32  # credited steps drawn per event, in proportion to their credit weight
     replay_updates_per_chunk: int = -1  # reward-model replay minibatches per chunk; -1 = chunk_steps // replay_every
@@ -81,6 +87,8 @@ class BatchedFeedbackConfig:
 
     def validate(self) -> None:
         check(self.teach_envs >= 0, "teach_envs", f"must be >= 0, got {self.teach_envs}")
+        check(not (self.teach_quiet and self.teach_envs), "teach_quiet",
+              f"picks the envs with a teacher itself: set teach_envs 0 (got {self.teach_envs}) or teach_quiet false")
         check(self.max_events_per_chunk >= 0, "max_events_per_chunk", f"must be >= 0, got {self.max_events_per_chunk}")
         check(self.rows_per_event >= 1, "rows_per_event", f"must be >= 1, got {self.rows_per_event}")
         check(self.fresh_updates_per_chunk >= -1, "fresh_updates_per_chunk",
@@ -91,9 +99,8 @@ class BatchedFeedbackConfig:
               f"must be >= -1, got {self.replay_updates_per_chunk}")
 
 
-def human_reward(hidden, bounded: bool = False):
+def human_reward(apply):
     """r_hat gated by a gain: `human_params = {"params": ..., "gain": scalar}`."""
-    apply = reward_fn(tuple(hidden), bounded)
 
     def fn(hp, obs, action):
         return hp["gain"] * apply(hp["params"], obs, action)
@@ -148,19 +155,18 @@ class FeedbackTrainer(NamedTuple):
 
 def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | None = None) -> FeedbackTrainer:
     """`config` a PretrainConfig, `feedback` a FeedbackConfig (teacher rule, reward model, credit, dt)."""
-    from mjx_protamer.agents.ddpg.train import AXIS, make_train
+    from mjx_protamer.agents.ddpg.train import AXIS, make_train, noisy_env_count
 
     batched = batched or BatchedFeedbackConfig()
     tc, fc = config.train, feedback
     B, T = tc.num_envs, tc.chunk_steps
     rmc = fc.reward_model
-    hidden = tuple(rmc.hidden)
-    trainer = make_train(config, env, human_reward_fn=human_reward(hidden, rmc.bounded))
+    nets = reward_nets(rmc)
+    trainer = make_train(config, env, human_reward_fn=human_reward(nets.apply))
     n_dev = trainer.num_devices
     sharded = trainer.mesh is not None
     local_B = B // n_dev
-    apply = reward_fn(hidden, rmc.bounded)
-    net = RewardMLP(hidden, rmc.bounded)
+    apply, net = nets.apply, nets.net
     opt = optax.adam(rmc.learning_rate)
     obs_size, act_size = env.observation_size, env.action_size
     cols = env_signal_columns(fc.teacher.signals, env)
@@ -172,6 +178,13 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     teach_envs = batched.teach_envs or B
     if teach_envs > B:
         raise ConfigError(f"config field 'batched.teach_envs': {teach_envs} > train.num_envs ({B})")
+    first_taught = 0  # envs first_taught .. first_taught + teach_envs - 1 have a teacher
+    if batched.teach_quiet:
+        noisy = noisy_env_count(B, config.ddpg.noise)
+        if noisy == B:
+            raise ConfigError("config field 'batched.teach_quiet': no env acts without noise; set "
+                              "pretrain.ddpg.noise.quiet_fraction > 0 (e.g. 0.25) or teach_quiet false")
+        first_taught, teach_envs = noisy, B - noisy
     E = batched.max_events_per_chunk or min(512, teach_envs * -(-T // max(fc.teacher.min_gap_steps, 1)))
     K = batched.rows_per_event
     n_replay = (T // rmc.replay_every if rmc.replay_every else 0) if batched.replay_updates_per_chunk < 0 \
@@ -224,7 +237,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         signals = rule_signals(cols, obs, action, terms, extras.get("region_mask"))
         rng, k_teach, k_lag, k_fresh = jax.random.split(fs.rng, 4)
         env_ids = (jax.lax.axis_index(AXIS) * local_B if sharded else 0) + jnp.arange(local_B)
-        active = (fp.teach > 0) & (env_ids < teach_envs)
+        active = (fp.teach > 0) & (env_ids >= first_taught) & (env_ids < first_taught + teach_envs)
         teacher, out = batched_teacher(kind_cfgs, dt, fs.teacher, signals, local_key(k_teach), kind=fp.kind,
                                        active=active)
         value, valid, about, score = out["value"], out["valid"], out["about"], out["score"]
@@ -253,7 +266,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
             h = jnp.concatenate([h, jnp.zeros((S,))])
         c_obs, c_act, w, h = gather(c_obs), gather(c_act), gather(w), gather(h)
         ring = ring_add(fs.ring, c_obs, c_act, w, h)
-        p, o, losses, live = reward_model_updates(apply, opt, fs.rm_params, fs.rm_opt_state, ring,
+        p, o, losses, live = reward_model_updates(nets.fit, opt, fs.rm_params, fs.rm_opt_state, ring,
                                                   (c_obs, c_act, w, h), k_fresh, n_fresh, n_replay,
                                                   rmc.batch_size, rmc.replay_min_rows,
                                                   rmc.balance_max if rmc.balance_signs else None)

@@ -1,7 +1,8 @@
 """DeepTAMER's human-reward model r_hat(s, a): a Flax MLP fitted to credited feedback.
 
 - Network: MLP 256-256 (ReLU) on concat(obs, action), linear scalar output (Warnell et al. 2018; spec,
-  "The reference learners"), or with `bounded` its tanh: r_hat within the labels' [-1, 1].
+  "The reference learners"), or with `bounded` its tanh: r_hat within the labels' [-1, 1]. With `ensemble`,
+  several such MLPs and r_hat = their mean - `pessimism` x their spread.
 - Loss: weighted squared error `sum_i w_i (r_hat(s_i, a_i) - h_i)^2 / sum_i w_i`, with w the credit
   weight of the step (`credit.py`) and h the feedback value.
 - Feedback replay buffer (host NumPy ring, 1e4 rows): each credited step is one row (obs, action, w, h).
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import flax.linen as nn
 import jax
@@ -47,6 +48,12 @@ class RewardModelConfig:
     # and a model fitted to that rates the scolded states far above -1 (near 0: measured, docs/experiments.md).
     balance_signs: bool = False
     balance_max: float = 10.0
+    # An ensemble of `ensemble` MLPs (own initialisations, the same minibatches, each fitted to the labels), and
+    # r_hat = their mean - `pessimism` x their standard deviation: where the members disagree (states far from
+    # any label) r_hat is lowered, so the actor is not drawn to states the model over-rates by chance
+    # (Lakshminarayanan et al. 2017, deep ensembles; pessimism as in conservative model-based RL).
+    ensemble: int = 1
+    pessimism: float = 0.0
 
     def validate(self) -> None:
         check(self.balance_max >= 1, "balance_max", f"must be >= 1, got {self.balance_max}")
@@ -59,32 +66,79 @@ class RewardModelConfig:
         check(self.updates_per_feedback >= 0, "updates_per_feedback", f"must be >= 0, got {self.updates_per_feedback}")
         check(self.replay_every >= 0, "replay_every", f"must be >= 0, got {self.replay_every}")
         check(self.replay_min_rows >= 1, "replay_min_rows", f"must be >= 1, got {self.replay_min_rows}")
+        check(self.ensemble >= 1, "ensemble", f"must be >= 1 (members), got {self.ensemble}")
+        check(self.pessimism >= 0, "pessimism", f"must be >= 0, got {self.pessimism}")
+        check(self.pessimism == 0 or self.ensemble >= 2, "pessimism",
+              f"needs an ensemble to measure disagreement: set ensemble >= 2 (got {self.ensemble}) or pessimism 0")
 
 
-class RewardMLP(nn.Module):
-    hidden: Sequence[int] = (256, 256)
-    bounded: bool = False
+class _Head(nn.Module):
+    hidden: Sequence[int]
+    bounded: bool
 
     @nn.compact
-    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
-        x = jnp.concatenate([obs, action], axis=-1)
+    def __call__(self, x: jax.Array) -> jax.Array:
         for width in self.hidden:
             x = nn.relu(nn.Dense(width)(x))
         out = nn.Dense(1)(x)[..., 0]
         return jnp.tanh(out) if self.bounded else out
 
 
+class RewardMLP(nn.Module):
+    """r_hat (...,) of one MLP, or with `ensemble` > 1 each member's (ensemble, ...)."""
+    hidden: Sequence[int] = (256, 256)
+    bounded: bool = False
+    ensemble: int = 1
+
+    @nn.compact
+    def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
+        x = jnp.concatenate([obs, action], axis=-1)
+        if self.ensemble > 1:
+            members = nn.vmap(_Head, variable_axes={"params": 0}, split_rngs={"params": True}, in_axes=None,
+                              out_axes=0, axis_size=self.ensemble)
+            return members(tuple(self.hidden), self.bounded, name="members")(x)
+        for width in self.hidden:  # one model: the layers at the top level, as checkpoints before ensembles
+            x = nn.relu(nn.Dense(width)(x))
+        out = nn.Dense(1)(x)[..., 0]
+        return jnp.tanh(out) if self.bounded else out
+
+
 @functools.lru_cache(maxsize=None)
-def reward_fn(hidden: tuple[int, ...] = (256, 256),
-              bounded: bool = False) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
-    """The pure r_hat(params, obs (B, obs), action (B, act)) -> (B,); one object per architecture, so
-    jit caches keyed on it stay warm."""
-    net = RewardMLP(tuple(hidden), bounded)
+def reward_fn(hidden: tuple[int, ...] = (256, 256), bounded: bool = False, ensemble: int = 1,
+              pessimism: float = 0.0) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
+    """The pure r_hat(params, obs (B, obs), action (B, act)) -> (B,): the model's, or an ensemble's mean less
+    `pessimism` x its members' standard deviation. One object per architecture, so jit caches keyed on it stay
+    warm."""
+    net = RewardMLP(tuple(hidden), bounded, ensemble)
 
     def apply(params, obs, action):
-        return net.apply(params, obs, action)
+        out = net.apply(params, obs, action)
+        return out if ensemble == 1 else jnp.mean(out, axis=0) - pessimism * jnp.std(out, axis=0)
 
     return apply
+
+
+@functools.lru_cache(maxsize=None)
+def fit_fn(hidden: tuple[int, ...] = (256, 256), bounded: bool = False,
+           ensemble: int = 1) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
+    """What the loss fits: (B,) for one model, (ensemble, B) for an ensemble, each member to the labels
+    (`weighted_loss` broadcasts the labels over the members and sums their losses)."""
+    net = RewardMLP(tuple(hidden), bounded, ensemble)
+    return lambda params, obs, action: net.apply(params, obs, action)
+
+
+class RewardNets(NamedTuple):
+    net: RewardMLP  # for init
+    apply: Callable  # r_hat(params, obs, action) -> (B,)
+    fit: Callable  # the fitted outputs (B,) or (ensemble, B)
+
+
+def reward_nets(config: "RewardModelConfig") -> RewardNets:
+    """The one place a reward-model config becomes networks (feedback_train, RewardModel, scripts)."""
+    hidden = tuple(config.hidden)
+    return RewardNets(RewardMLP(hidden, config.bounded, config.ensemble),
+                      reward_fn(hidden, config.bounded, config.ensemble, config.pessimism),
+                      fit_fn(hidden, config.bounded, config.ensemble))
 
 
 def sign_factors(xp, weight, target, max_factor: float):
@@ -105,6 +159,7 @@ def balanced_weight(xp, factors, weight, target):
 
 
 def weighted_loss(params, apply, obs, action, weight, target):
+    """sum_i w_i (pred_i - h_i)^2 / sum_i w_i; an ensemble's (members, B) predictions: the members' sum."""
     pred = apply(params, obs, action)
     return jnp.sum(weight * (pred - target) ** 2) / jnp.maximum(jnp.sum(weight), 1e-8)
 
@@ -157,9 +212,9 @@ class RewardModel:
     def __init__(self, config: RewardModelConfig, obs_size: int, action_size: int, seed: int = 0):
         self.config = config
         self.obs_size, self.action_size = obs_size, action_size
-        self.apply = reward_fn(tuple(config.hidden), config.bounded)
-        net = RewardMLP(tuple(config.hidden), config.bounded)
-        self.params = net.init(jax.random.PRNGKey(seed), jnp.zeros((1, obs_size)), jnp.zeros((1, action_size)))
+        nets = reward_nets(config)
+        self.apply = nets.apply
+        self.params = nets.net.init(jax.random.PRNGKey(seed), jnp.zeros((1, obs_size)), jnp.zeros((1, action_size)))
         self.optimizer = optax.adam(config.learning_rate)
         self.opt_state = self.optimizer.init(self.params)
         self.buffer = FeedbackBuffer(config.buffer_size, obs_size, action_size)
@@ -167,7 +222,7 @@ class RewardModel:
         self.updates = 0
         self.last_loss = float("nan")
         self._steps_since_replay = 0
-        self._update = jax.jit(functools.partial(_update, self.apply, self.optimizer))
+        self._update = jax.jit(functools.partial(_update, nets.fit, self.optimizer))
 
     def _step(self, batch) -> float:
         if self.config.balance_signs:

@@ -135,3 +135,28 @@ def test_feedback_chunk_runs_on_two_devices():
     assert r["feedback_total"] > 20 and r["credited"] > r["feedback_total"] and r["rm_updates_total"] > 0
     assert np.isfinite(r["corr"])
     assert r["vmapped_seed0"] == r["feedback_total"] and r["vmapped_seed1"] > 0
+
+
+def test_teach_quiet_puts_the_teachers_on_the_envs_without_noise_only():
+    """`batched.teach_quiet`: feedback comes only from the envs acting with the deterministic actor (the last
+    `quiet_fraction` of them), which are the behaviour the test episodes measure; without such envs the config
+    is refused with the field to change."""
+    from mjx_protamer.config import ConfigError
+
+    raw = toy_feedback_config(num_devices=0)
+    raw["pretrain"]["ddpg"]["noise"] = {"quiet_fraction": 0.5}
+    raw["batched"] = {"teach_quiet": True}
+    cfg, ft = build(raw)
+    ts, fs = ft.trainer.init(jax.random.PRNGKey(0)), ft.init(0)
+    fp = ft.params("keyboard", cfg.feedback.credit)
+    envs = []
+    for _ in range(cfg.pretrain.train.num_chunks):
+        ts, fs, m, ev = ft.chunk(ts, fs, fp)
+        envs += np.asarray(ev["env"])[np.asarray(ev["present"])].tolist()
+    assert len(envs) > 10 and set(envs) <= {2, 3}, envs
+    raw["pretrain"]["ddpg"]["noise"] = {"quiet_fraction": 0.0}
+    with pytest.raises(ConfigError, match="quiet_fraction"):
+        build(raw)
+    raw["batched"] = {"teach_quiet": True, "teach_envs": 2}
+    with pytest.raises(ConfigError, match="teach_envs"):
+        build(raw)

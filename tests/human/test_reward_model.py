@@ -132,3 +132,33 @@ def test_balanced_model_rates_rarely_scolded_states_lower():
     plain, balanced = fit(False), fit(True)
     assert balanced[-1.0] < plain[-1.0] - 0.4, (plain, balanced)  # measured: -0.42 plain, -1.06 balanced
     assert balanced[1.0] > 0.5, balanced
+
+
+def test_an_ensemble_fits_every_member_and_pessimism_lowers_r_hat_where_they_disagree():
+    """Each member fits the labels (the loss is the members' sum, so one member's gradient never moves another);
+    r_hat is the members' mean less `pessimism` x their spread: near the labelled states the members agree and
+    r_hat is the label, far from them they disagree and r_hat drops below the mean."""
+    cfg = RewardModelConfig(hidden=(32, 32), bounded=True, ensemble=4, pessimism=1.0, replay_every=1)
+    model = RewardModel(cfg, OBS, ACT, seed=0)
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(256, OBS)).astype(np.float32)
+    act = rng.uniform(-1, 1, size=(256, ACT)).astype(np.float32)
+    target = np.sign(obs[:, 0]).astype(np.float32)  # +1 / -1 by the first feature
+    for i in range(0, 256, 16):
+        model.add(obs[i:i + 16], act[i:i + 16], np.ones(16), target[i:i + 16])
+    model.replay(600)
+    members = RewardMLP((32, 32), True, 4).apply(model.params, jnp.asarray(obs), jnp.asarray(act))
+    assert members.shape == (4, 256)
+    for m in np.asarray(members):  # every member learnt the labels on its own
+        assert np.mean(np.sign(m) == target) > 0.95
+    far = 20.0 * rng.normal(size=(256, OBS)).astype(np.float32)  # no label anywhere near
+    spread = lambda o: np.asarray(RewardMLP((32, 32), True, 4).apply(model.params, jnp.asarray(o), jnp.asarray(act)).std(0))
+    assert spread(far).mean() > 3 * spread(obs).mean()
+    mean_far = np.asarray(RewardMLP((32, 32), True, 4).apply(model.params, jnp.asarray(far), jnp.asarray(act)).mean(0))
+    np.testing.assert_allclose(model.predict(far, act), mean_far - spread(far), rtol=1e-5, atol=1e-6)
+    assert np.mean(np.sign(model.predict(obs, act)) == target) > 0.95
+
+
+def test_pessimism_without_an_ensemble_is_refused():
+    with pytest.raises(ConfigError, match="ensemble"):
+        from_dict(RewardModelConfig, {"pessimism": 0.5})

@@ -102,6 +102,11 @@ def _strong(tree):
     return jax.tree.map(lambda x: x.astype(x.dtype) if isinstance(x, jax.Array) else x, tree)
 
 
+def noisy_env_count(num_envs: int, noise) -> int:
+    """How many envs (the first ones) act with exploration noise; the rest act with the deterministic actor."""
+    return num_envs - int(round(noise.quiet_fraction * num_envs))
+
+
 def resolve_devices(num_devices: int) -> list:
     devices = jax.devices()
     if num_devices == 0:
@@ -145,7 +150,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
     # every row for a signal the learner never reads).
     emit_regions = bool(getattr(env, "region_names", ()))
     # Envs from index `noisy_envs` on act with the deterministic actor (`noise.quiet_fraction`).
-    noisy_envs = tc.num_envs - int(round(dc.noise.quiet_fraction * tc.num_envs))
+    noisy_envs = noisy_env_count(tc.num_envs, dc.noise)
 
     def local_key(key):
         """Per-device randomness (env resets, noise, minibatches); the carried key stays replicated."""

@@ -1,0 +1,105 @@
+"""Where a table2 run's reward models err on their own test states (issue 8's `r_hat_corr_test`).
+
+Reads a finished `protamer reproduce table2 --out DIR` run (its config.yaml, reward_models/<condition>/ and
+test_states_<condition>.npz: the sampled test-episode states with their hidden score) and prints one JSON line
+per seed: how the test states split by hidden score, r_hat's mean and spread within each score, the
+correlation, and the correlation r_hat would have with its within-score spread removed (each state given its
+class mean): the part of the shortfall that comes from ranking states of the same score differently rather
+than from the classes' means. A compliant policy's test states are nearly all of one score, so a small spread
+within it costs much correlation. Also: how much of each score lies in runs shorter than the teacher's noticing
+time (the rule's longest `sustain`), the median length of the runs its states lie in, and the correlation with a "perceivable" score in which such runs take
+the score of the run before them (a teacher who notices a touch after 0.1 s cannot judge a 50 ms lift of the
+hand): a diagnostic beside the issue's metric, not a replacement.
+
+    .venv/bin/python scripts/r_hat_on_test_states.py runs/table2 [--condition DTK]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def corr(x, y) -> float | None:
+    x, y = x - x.mean(), y - y.mean()
+    den = np.sqrt(np.sum(x * x) * np.sum(y * y))
+    return float(np.sum(x * y) / den) if den > 1e-12 else None
+
+
+def runs_of(x: np.ndarray):
+    """(start, length, value) of each run of equal values of a 1-D array."""
+    edges = np.flatnonzero(np.diff(x) != 0) + 1
+    starts = np.concatenate([[0], edges])
+    lengths = np.diff(np.concatenate([starts, [len(x)]]))
+    return starts, lengths, x[starts]
+
+
+def perceivable(score_episode: np.ndarray, min_samples: int) -> np.ndarray:
+    """The score with every run shorter than `min_samples` (after the first) given the preceding run's score."""
+    out = score_episode.copy()
+    for start, length, _ in zip(*runs_of(score_episode)):
+        if start > 0 and length < min_samples:
+            out[start:start + length] = out[start - 1]
+    return out
+
+
+def main(argv=None) -> int:
+    from mjx_protamer.experiments import checkpoints
+    from mjx_protamer.experiments.table2 import STATE_STRIDE, load_table2_config
+    from mjx_protamer.human.reward_model import reward_nets
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path, help="the --out directory of a finished table2 run")
+    ap.add_argument("--condition", default="DTK")
+    args = ap.parse_args(argv)
+    states_path = args.run / f"test_states_{args.condition}.npz"
+    if not states_path.is_file():
+        raise SystemExit(f"error: {states_path} is missing: give the --out directory of a finished table2 run "
+                         f"and a condition it ran (--condition)")
+    cfg = load_table2_config(args.run / "config.yaml")
+    with np.load(states_path) as f:
+        obs, action, score = f["obs"], f["action"], f["score"]
+    nets = reward_nets(cfg.feedback.reward_model)
+    keys = jax.random.split(jax.random.PRNGKey(0), len(obs))
+    like = jax.vmap(lambda k: nets.net.init(k, jnp.zeros((1, obs.shape[-1])), jnp.zeros((1, action.shape[-1]))))(keys)
+    params = checkpoints.restore(checkpoints.manager(args.run / "reward_models" / args.condition), 0, like)
+    r_hat = np.asarray(jax.jit(jax.vmap(nets.apply))(params, obs, action))
+    per_episode = cfg.pretrain.train.episode_length // STATE_STRIDE  # the samples are whole episodes in order
+    notice = max(c.sustain for c in cfg.feedback.teacher.rule)
+    min_samples = max(1, -(-notice // STATE_STRIDE))
+    for i, seed in enumerate(cfg.seeds):
+        r, s = r_hat[i], score[i]
+        classes = {}
+        class_mean = np.zeros_like(r)
+        episodes = s.reshape(-1, per_episode)
+        run_len = np.zeros(episodes.shape, int)  # the length (samples) of the run each state lies in
+        for e, ep in enumerate(episodes):
+            for start, length, _ in zip(*runs_of(ep)):
+                run_len[e, start:start + length] = length
+        run_len = run_len.reshape(-1)
+        short = run_len < min_samples
+        sample_s = STATE_STRIDE * cfg.feedback.dt
+        seen = np.concatenate([perceivable(ep, min_samples) for ep in episodes])
+        for v in np.unique(s):
+            m = s == v
+            classes[f"{v:+.1f}"] = {"fraction": round(float(m.mean()), 3), "r_hat_mean": round(float(r[m].mean()), 3),
+                                    "r_hat_std": round(float(r[m].std()), 3),
+                                    "in_runs_shorter_than_noticing": round(float(short[m].mean()), 3),
+                                    "median_run_s": round(float(np.median(run_len[m])) * sample_s, 3)}
+            class_mean[m] = r[m].mean()
+        rnd = lambda x: None if x is None else round(x, 3)
+        print(json.dumps({"seed": seed, "states": int(len(s)), "score_std": round(float(s.std()), 3),
+                          "r_hat_corr_test": rnd(corr(r, s)),
+                          "corr_without_spread_within_score": rnd(corr(class_mean, s)),
+                          "corr_with_perceivable_score": rnd(corr(r, seen)),
+                          "noticing_steps": notice, "by_score": classes}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

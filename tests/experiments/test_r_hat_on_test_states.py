@@ -1,0 +1,26 @@
+"""scripts/r_hat_on_test_states.py: the "perceivable" score merges runs shorter than the teacher's noticing time."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+_spec = importlib.util.spec_from_file_location(
+    "r_hat_on_test_states", Path(__file__).resolve().parents[2] / "scripts" / "r_hat_on_test_states.py")
+script = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(script)
+
+
+def test_runs_are_found_with_their_lengths_and_values():
+    starts, lengths, values = script.runs_of(np.array([1, 1, 0, 0, 0, 1, -1]))
+    assert starts.tolist() == [0, 2, 5, 6] and lengths.tolist() == [2, 3, 1, 1] and values.tolist() == [1, 0, 1, -1]
+
+
+def test_a_lift_shorter_than_noticing_takes_the_touch_around_it_and_a_long_one_stays():
+    ep = np.array([0, 1, 1, 1, 0, 1, 1, 0, 0, 0, 0, 1], float)
+    seen = script.perceivable(ep, min_samples=3)
+    # the episode's first run keeps its score; the 1-sample lift is merged; the 4-sample gap stays; the last
+    # 1-sample touch is too short to notice and takes the gap's 0
+    assert seen.tolist() == [0, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0]
+    assert script.corr(np.array([0.0, 1.0]), np.array([0.0, 2.0])) == 1.0
+    assert script.corr(np.ones(3), np.arange(3.0)) is None
