@@ -181,6 +181,9 @@ def _finetune(args: argparse.Namespace) -> int:
     from mjx_protamer.commands.finetune_view import default_view
     if args.feedback == "web" and (args.view or default_view()) != "web":
         return _fail("--feedback web takes feedback from the live page: it needs --view web")
+    if live and args.learner == "ddpg" and (args.view or default_view()) != "web" and _needs_attention(args):
+        return _fail("feedback.credit.silence_needs_attention counts a silence only while the live page is "
+                     "visible: it needs --view web (or set it false)")
     # Fail fast, before the minutes of loading and compiling, on what a live user can get wrong.
     if args.feedback == "keyboard" and not sys.stdin.isatty():
         return _fail("--feedback keyboard reads keys from the terminal, but stdin is not a terminal (tty). "
@@ -232,6 +235,13 @@ def _finetune(args: argparse.Namespace) -> int:
     elif _recorded_backend(args.out):  # the env the session recorded (COACH resumes from the pretrain config)
         loaded = _live_env(*loaded, _recorded_backend(args.out))
     return _session(args, live, voice, *loaded)
+
+
+def _needs_attention(args) -> bool:
+    """Whether the session's feedback config gates silences on the teacher's attention."""
+    from mjx_protamer.human.tamer_loop import load_feedback_config
+
+    return load_feedback_config(args.config, args.overrides).feedback.credit.silence_needs_attention
 
 
 def _load(args, ckpt: Path):
@@ -406,6 +416,9 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     "segments": str(args.save_segments or (out / "segments")) if voice is not None else None,
                     "env_backend": pre.env.backend if pre.env_name == "self_touch" else None,
                     "started": time.time(), **_checkpoint_identity(Path(args.checkpoint), step)}
+    if getattr(run, "attention", None) is not None:
+        print("[finetune] credit.silence_needs_attention: a silent step teaches 'nothing to say' only while the "
+              "live page is visible", flush=True)
     recorder = SessionRecorder(out)
     write_json_atomic(out / MANIFEST, manifest)
     if run.log is not None:
@@ -591,7 +604,12 @@ def _print_chunk(run, m, learner: str) -> None:
 def _print_outcomes(run, learner: str) -> None:
     from mjx_protamer.commands.feedback_text import outcome_text
 
+    from mjx_protamer.human.attention import is_attention
+
     for event, got, why in run.outcomes:
+        if is_attention(event):
+            print(f"[attention] {why}", flush=True)
+            continue
         label = event.details.get("transcript") or event.details.get("key") or ""
         head = f"[event] {event.source} {event.value:+.2f}" + (f" ({label!r})" if label else "")
         print(f"{head}: {outcome_text(run, got, why, learner)}", flush=True)

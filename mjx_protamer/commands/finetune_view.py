@@ -30,9 +30,12 @@ def start_view(kind: str, pre, run, port: int):
 
 def last_event(run, learner: str) -> dict | None:
     """The last drained event and what became of it, for the page."""
-    if not run.outcomes:
+    from mjx_protamer.human.attention import is_attention
+
+    feedback = [o for o in run.outcomes if not is_attention(o[0])]
+    if not feedback:
         return None
-    event, got, why = run.outcomes[-1]
+    event, got, why = feedback[-1]
     return {"value": float(event.value), "source": event.source, "t": float(event.t_start),
             "outcome": outcome_text(run, got, why, learner)}
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from mjx_protamer.agents.coach import CoachConfig, CoachLearner
 from mjx_protamer.agents.coach.networks import log_prob
+from mjx_protamer.human.attention import describe, is_attention
 from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
 from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, env_signal_columns, rule_signals, with_channel
@@ -144,6 +145,9 @@ class CoachRun:
         """Drain and log the queue; each event corrects the window before the step it began at."""
         self.outcomes = []
         for event in self.queue.drain(self.log, step=step):
+            if is_attention(event):  # the live page's watching state: COACH learns from corrections only
+                self.outcomes.append((event, None, describe(event, used=False)))
+                continue
             self.events += 1
             s = self.step_clock.step_at(event.t_start)
             why = None

@@ -179,13 +179,16 @@ class StepHistory:
         h = np.full(len(idx), credit.event.value, np.float32)
         return self.obs[idx], self.action[idx], w, h
 
-    def silent_samples(self, first: int, last: int, weight: float):
+    def silent_samples(self, first: int, last: int, weight: float, watched: np.ndarray | None = None):
         """(obs, action, weight, target 0) rows for the remembered steps first..last that no credit read: the
         teacher watched them and said nothing (the host twin of `batched.draw_silent_steps`; call it once a
-        step's `silence_reach_s` has passed)."""
+        step's `silence_reach_s` has passed). `watched` (one bool per step first..last): only those steps."""
         steps = np.arange(first, last + 1, dtype=np.int64)
         idx = steps % self.capacity
-        idx = idx[(self.step[idx] == steps) & ~self.credited[idx]]
+        keep = (self.step[idx] == steps) & ~self.credited[idx]
+        if watched is not None:
+            keep &= np.asarray(watched, bool)
+        idx = idx[keep]
         n = len(idx)
         return self.obs[idx], self.action[idx], np.full(n, weight, np.float32), np.zeros(n, np.float32)
 

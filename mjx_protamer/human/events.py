@@ -14,8 +14,9 @@ import math
 import time
 from typing import Any, Literal
 
-Source = Literal["keyboard", "prosody", "whisper", "simulated"]
-SOURCES: tuple[str, ...] = ("keyboard", "prosody", "whisper", "simulated")
+# "attention" is no feedback: the live page saying whether it is watched (value 1 or 0; human/attention.py).
+Source = Literal["keyboard", "prosody", "whisper", "simulated", "attention"]
+SOURCES: tuple[str, ...] = ("keyboard", "prosody", "whisper", "simulated", "attention")
 
 # A clock skew allowance: events stamped this far ahead of the receiver's clock are still accepted.
 MAX_FUTURE_S = 0.5
@@ -77,6 +78,9 @@ def validate_event(event: FeedbackEvent, now: float | None = None) -> FeedbackEv
             raise InvalidFeedback(f"{name} must be a finite number, got {v!r}", "not_finite")
     if not -1.0 <= event.value <= 1.0:
         raise InvalidFeedback(f"value {event.value} is outside [-1, 1]", "out_of_range")
+    if event.source == "attention" and event.value not in (0.0, 1.0):
+        raise InvalidFeedback(f"an attention event's value is 1 (watching) or 0 (not), got {event.value}",
+                              "out_of_range")
     if event.t_end < event.t_start:
         raise InvalidFeedback(f"t_end {event.t_end} is before t_start {event.t_start}", "time_order")
     if event.t_end > now + MAX_FUTURE_S:

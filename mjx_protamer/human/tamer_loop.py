@@ -28,6 +28,7 @@ import numpy as np
 
 from mjx_protamer.agents.ddpg.config import PretrainConfig
 from mjx_protamer.config import ConfigError, check
+from mjx_protamer.human.attention import AttentionTimeline, describe, is_attention
 from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory, silence_reach_s
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
@@ -87,9 +88,10 @@ class TamerRun:
 
         self.config = config
         fc, tc = config.feedback, config.pretrain.train
-        if fc.credit.silence_needs_attention and feedback is not None:
-            raise ConfigError("config field 'feedback.credit.silence_needs_attention': this loop has no signal of "
-                              "when the teacher watches; set it false (it serves the in-jit simulated teachers)")
+        if fc.credit.silence_needs_attention and feedback is not None and feedback != "queue":
+            raise ConfigError("config field 'feedback.credit.silence_needs_attention': the host's simulated teachers "
+                              "report no attention; set it false here (the in-jit teachers of pretrain/reproduce "
+                              "and a live session's page do)")
         self.env = env
         self.feedback = feedback
         self.use_model = feedback is not None
@@ -109,6 +111,8 @@ class TamerRun:
         self.assigner = CreditAssigner(fc.credit, self.step_clock, fc.teacher.channel)
         self.silence_reach = silence_reach_s(fc.credit, fc.dt, fc.teacher.channel)
         self.silent_next = 0  # the first step not yet judged silent or credited
+        # when the live teacher watched (its page's attention events); None: every silence counts
+        self.attention = AttentionTimeline() if fc.credit.silence_needs_attention else None
         self.teacher = None
         if self.simulated:
             kind = feedback.split(":", 1)[1] if ":" in feedback else fc.teacher.channel.kind
@@ -176,6 +180,11 @@ class TamerRun:
         credits = []
         self.outcomes = []
         for event in self.queue.drain(self.log, step=step):
+            if is_attention(event):  # no feedback: when the teacher watches (logged and recorded all the same)
+                if self.attention is not None:
+                    self.attention.record(event)
+                self.outcomes.append((event, None, describe(event, self.attention is not None)))
+                continue
             self.events += 1
             credit, why = self.assigner.assign(event)
             self.outcomes.append((event, credit, why))
@@ -193,15 +202,29 @@ class TamerRun:
     def add_silent_steps(self, now: float) -> int:
         """Steps whose credit window had closed by `now` (the time of the chunk's drain: its recorded t0, so a
         replay judges the same steps) with no event crediting them become rows with target 0 and weight
-        `credit.silence_weight` (0: none, as Deep TAMER). Returns how many rows were added."""
+        `credit.silence_weight` (0: none, as Deep TAMER); with `credit.silence_needs_attention` only the steps
+        the teacher watched from when they were shown until their window closed. Returns how many rows were
+        added."""
         w = self.config.feedback.credit.silence_weight
         closed = self.step_clock.step_at(now - self.silence_reach) if len(self.step_clock) else None
         if not (self.use_model and w > 0 and closed is not None and closed > self.silent_next):
             return 0
-        obs, act, weight, target = self.history.silent_samples(self.silent_next, closed - 1, w)
+        watched = None
+        if self.attention is not None:
+            shown = np.array([self._shown_at(k) for k in range(self.silent_next, closed)])
+            known = np.isfinite(shown)
+            watched = known & self.attention.watched_throughout(np.where(known, shown, 0.0),
+                                                                np.where(known, shown, 0.0) + self.silence_reach)
+        obs, act, weight, target = self.history.silent_samples(self.silent_next, closed - 1, w, watched)
         self.silent_next = closed
         self.model.add(obs, act, weight, target, update=False)  # replayed with the events' rows
         return len(weight)
+
+    def _shown_at(self, step: int) -> float:
+        try:
+            return self.step_clock.time_of(step)
+        except KeyError:  # older than the clock remembers: not judged watched
+            return float("nan")
 
     def close(self) -> None:
         if self.log is not None:

@@ -4,7 +4,11 @@ GET /?token=T serves the page; GET /ws?token=T is a websocket on which the serve
 frame (binary JPEG, only when a new one exists: a slow browser skips frames) and a status message (JSON)
 a few times a second, and the page sends {"type": "feedback", "value": +1 | -1 | 0}. Each value goes into
 the learner's FeedbackQueue exactly as a terminal key press would (source "keyboard"), and the page
-gets {"type": "ack", ...} with the queue's verdict. Requests without the token get 403.
+gets {"type": "ack", ...} with the queue's verdict. The page also sends {"type": "attention", "watching": bool}
+when it connects and whenever it is shown or hidden (the Page Visibility API); while any page is visible the
+teacher is watching, and each change (a page closing counts as hidden) goes into the queue as an attention
+event (human/attention.py), answered with {"type": "attention", "watching": ...}. Requests without the token
+get 403.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from importlib import resources
 
 from aiohttp import WSMsgType, web
 
+from mjx_protamer.human.attention import attention_event
 from mjx_protamer.human.events import FeedbackEvent
 
 PUSH_PERIOD_S = 0.02
@@ -45,6 +50,18 @@ def make_app(player, feedback_queue, token: str | None = None, on_feedback=None)
             on_feedback(value, ok, reason)
         return {"type": "ack", "value": value, "accepted": ok, "reason": reason, "t": t}
 
+    visible: set = set()  # the connections whose page is visible now
+    watching = [False]  # what the queue was last told
+
+    def attend(ws, on: bool) -> dict:
+        (visible.add if on else visible.discard)(ws)
+        now = bool(visible)
+        if now != watching[0]:
+            ok, _ = feedback_queue.offer(attention_event(time.time(), now, "web page"))
+            if ok:
+                watching[0] = now
+        return {"type": "attention", "watching": watching[0]}
+
     async def ws_handler(request):
         if not authorised(request):
             raise web.HTTPForbidden(text="missing or wrong token")
@@ -70,6 +87,9 @@ def make_app(player, feedback_queue, token: str | None = None, on_feedback=None)
                     continue
                 try:
                     data = json.loads(msg.data)
+                    if isinstance(data, dict) and data.get("type") == "attention":
+                        await ws.send_str(json.dumps(attend(ws, bool(data.get("watching")))))
+                        continue
                     value = float(data["value"])
                     if data.get("type") != "feedback" or value not in (1.0, -1.0, 0.0):
                         raise ValueError
@@ -79,6 +99,7 @@ def make_app(player, feedback_queue, token: str | None = None, on_feedback=None)
                 await ws.send_str(json.dumps(give(value)))
         finally:
             pusher.cancel()
+            attend(ws, False)  # a closed page is not watched
         return ws
 
     app.router.add_get("/", index)

@@ -145,6 +145,12 @@ def test_keyboard_without_a_terminal_is_a_clear_error(tmp_path, capsys, monkeypa
     assert "stdin is not a terminal" in capsys.readouterr().err
 
 
+def test_silences_gated_on_attention_without_the_live_page_is_a_clear_error(tmp_path, capsys):
+    assert run_main("--feedback", "keyboard", "--checkpoint", tmp_path, "--out", tmp_path / "o",
+                    "--set", "feedback.credit.silence_needs_attention=true") == 2
+    assert "silence_needs_attention counts a silence only while the live page is visible" in capsys.readouterr().err
+
+
 def test_bad_listen_source_and_missing_wav(tmp_path, capsys):
     assert run_main("--feedback", "whisper", "--listen-source", "speaker", "--checkpoint", tmp_path) == 2
     assert "--listen-source must be 'mic' or 'wav:PATH'" in capsys.readouterr().err

@@ -49,19 +49,28 @@ class Session:
         raise AssertionError(f"{prefix!r} not seen; output:\n{''.join(self.lines)[-3000:]}")
 
 
+# Headless chromium is always "visible"; a person's hidden tab is played by overriding the property the page
+# reads and firing the event the browser would.
+_SET_VISIBILITY = """(state) => {
+  Object.defineProperty(document, "visibilityState", {value: state, configurable: true});
+  document.dispatchEvent(new Event("visibilitychange"));
+}"""
+
+
 def _image(png: bytes) -> np.ndarray:
     import imageio.v3 as iio
     return iio.imread(io.BytesIO(png)).astype(int)
 
 
-def test_live_page_in_headless_chromium_shows_the_run_and_its_buttons_feed_the_queue(toy_run, tmp_path):
+def test_live_page_in_headless_chromium_shows_the_run_feeds_the_queue_and_says_when_it_is_watched(toy_run, tmp_path):
     sync_api = pytest.importorskip("playwright.sync_api")
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         pytest.skip("needs Debian's chromium (apt-get install chromium; scripts/test.sh does as root)")
     out = tmp_path / "ft"
     s = Session([sys.executable, "-m", "mjx_protamer.cli", "finetune", "--feedback", "web", "--view", "web",
-                 "--checkpoint", str(toy_run), "--out", str(out), "--seconds", "600"])
+                 "--checkpoint", str(toy_run), "--out", str(out), "--seconds", "600",
+                 "--set", "feedback.credit.silence_needs_attention=true"])
     try:
         url = s.wait_for("[view] http://127.0.0.1:").split(" ", 1)[1]
         s.wait_for("[finetune] ready: give feedback now")
@@ -85,16 +94,34 @@ def test_live_page_in_headless_chromium_shows_the_run_and_its_buttons_feed_the_q
                                    timeout=20_000)
             assert page.inner_text("#learner").startswith("ddpg, feedback web")
             assert int(page.inner_text("#step")) > 0  # the step on screen
+            # the page says whether it is seen: hidden (another tab, a minimised window), then shown again
+            assert page.inner_text("#attention") == "the learner knows you are watching"
+            page.evaluate(_SET_VISIBILITY, "hidden")
+            page.wait_for_function("document.getElementById('attention').textContent.endsWith('away')", timeout=10_000)
+            page.evaluate(_SET_VISIBILITY, "visible")
+            page.wait_for_function("document.getElementById('attention').textContent.endsWith('watching')",
+                                   timeout=10_000)
+            s.wait_for("[attention] watching (web page): silent steps count", timeout=30)
             page.screenshot(path=str(tmp_path / "live_page.png"))
-            browser.close()
+            browser.close()  # a closed page is not watched
+        end = time.time() + 30
+        while "".join(s.lines).count("[attention] not watching (web page)") < 2 and time.time() < end:
+            time.sleep(0.2)
         s.proc.send_signal(signal.SIGINT)
         assert s.proc.wait(120) == 130
     finally:
         if s.proc.poll() is None:
             s.proc.kill()
     text = "".join(s.lines)
-    events = FeedbackLog.read(out / "feedback.jsonl")
+    logged = FeedbackLog.read(out / "feedback.jsonl")
+    events = [e for e in logged if e.source != "attention"]
     assert [e.value for e in events] == [1.0, -1.0], text
     assert all(e.source == "keyboard" and e.details["via"] == "web" for e in events)
+    # watching from the first connection, away, back, and away when the browser closed: in the log and the
+    # session record, so a replay gates the same silences
+    assert [e.value for e in logged if e.source == "attention"] == [1.0, 0.0, 1.0, 0.0]
+    recorded = (out / "session_chunks.jsonl").read_text()
+    assert recorded.count('"source": "attention"') == 4
+    assert "silence_needs_attention: a silent step teaches" in text
     assert text.count("accepted, credited steps") == 2
     assert "[view] closed" in text and (tmp_path / "live_page.png").stat().st_size > 10_000
