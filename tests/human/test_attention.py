@@ -32,6 +32,8 @@ def test_the_live_loop_learns_from_the_silences_its_page_watched_and_records_the
     from mjx_protamer.human.queue import FeedbackLog
     from mjx_protamer.human.tamer_loop import TamerRun, load_feedback_config
 
+    from mjx_protamer.human.session_record import ScriptedQueue
+
     cfg = load_feedback_config(None, [
         "pretrain.env_name=toy", "pretrain.ddpg.actor_hidden=[16]", "pretrain.ddpg.critic_hidden=[16,16]",
         "pretrain.train.num_envs=1", "pretrain.train.episode_length=50", "pretrain.train.warmup_env_steps=0",
@@ -42,9 +44,11 @@ def test_the_live_loop_learns_from_the_silences_its_page_watched_and_records_the
     run = TamerRun(cfg, PointReachEnv(cfg.pretrain.toy), feedback="queue", clock=VirtualClock(start=t_start),
                    log_path=tmp_path / "fb.jsonl")
     run.step_chunk(t0=t_start)  # steps 0-99 shown over 1000-1005 s
+    drains = [[o[0] for o in run.outcomes]]
     run.queue.put(attention_event(t_start + 1.0, True, "test"))
     run.queue.put(attention_event(t_start + 3.0, False, "test"))
     run.step_chunk()  # drains both, then judges the steps whose window closed by 1005 s
+    drains.append([o[0] for o in run.outcomes])
     run.close()
     reach, dt = run.silence_reach, cfg.feedback.dt
     assert 0.1 < reach < 1.5  # the keyboard channel's delay span
@@ -55,3 +59,10 @@ def test_the_live_loop_learns_from_the_silences_its_page_watched_and_records_the
     assert run.events == 0  # attention is not feedback
     records = FeedbackLog.records(tmp_path / "fb.jsonl")
     assert [r["value"] for r in records if r.get("source") == "attention"] == [1.0, 0.0]
+    # a replay of the session record (the drained events, the chunks' times) gates the same silences
+    again = TamerRun(cfg, PointReachEnv(cfg.pretrain.toy), feedback="queue", queue=ScriptedQueue(drains),
+                     clock=VirtualClock(start=t_start))
+    again.step_chunk(t0=t_start)
+    again.step_chunk(t0=t_start + 100 * dt)
+    assert again.model.buffer.size == buf.size
+    np.testing.assert_array_equal(again.model.buffer.obs[:buf.size], buf.obs[:buf.size])
