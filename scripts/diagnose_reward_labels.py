@@ -15,12 +15,16 @@ Two steps, both on the production code paths:
            training states, one JSON line per variant.
            .venv/bin/python scripts/diagnose_reward_labels.py fit runs/labels_seed{0,1,2,3,4}.npz
 
-Variants (`--variants`, comma-separated NAME:SILENCE_WEIGHT[:balanced]):
+Variants (`--variants`, comma-separated NAME:SILENCE_WEIGHT[:balanced][:em]):
   teacher      the teacher's labels: each event's value on its credited steps, 0 on silent steps
   exact        the same steps, labelled with their hidden score (the states' ceiling)
   no_mistakes  the teacher's labels without the events whose sign the teacher flipped (`flip_prob`)
   attentive    the teacher's labels, the silent steps limited to those whose hidden score is 0 (an oracle
                that knows when silence meant "nothing to say" rather than "not watching")
+  ...:em        after the fit, each event's credited rows are reweighted by how well the model agrees with
+               the event (weight x exp(T v r_hat), renormalised per event: the posterior over which of its
+               steps the event was about, an EM step) and the model is refitted, `--em-rounds` times at
+               temperature `--em-temperature`
 Also printed: how many reproaches were flipped praise, and where the silent steps with score +1 lie.
 """
 
@@ -102,12 +106,12 @@ def fit(args) -> None:
         for metric in ("r_hat_corr_test", "r_hat_corr_late_training"):
             stats = seed_stats([run[name][metric] for run in per_run])
             print(json.dumps({"variant": name, "metric": metric, "mean": round(stats["mean"], 3),
-                              "ci95": round(stats["ci95"], 3),
+                              "ci95": None if stats["ci95"] is None else round(stats["ci95"], 3),
                               "per_seed": [round(v, 3) for v in stats["seed_values"]]}), flush=True)
 
 
 def fit_one(args, path) -> dict:
-    from mjx_protamer.human.batched import FeedbackRing, draw_credited_steps, reward_model_updates
+    from mjx_protamer.human.batched import draw_credited_steps
     from mjx_protamer.human.reward_model import RewardMLP, reward_fn
 
     d = np.load(path)
@@ -190,23 +194,37 @@ def fit_one(args, path) -> dict:
             w_si = w_si * (si_score == 0)
         h_ev = ev_score if name == "exact" else target.reshape(-1)
         h_si = si_score if name == "exact" else np.zeros(len(s_t))
-        rows = [np.concatenate(x).astype(np.float32) for x in (
-            (ev_obs, si_obs), (ev_act, si_act), (w_ev.reshape(-1), w_si), (h_ev, h_si))]
-        keep = rows[2] > 0
-        o, a, w, h = (jnp.asarray(r[keep]) for r in rows)
-        ring = FeedbackRing(o, a, w, h, jnp.int32(0), jnp.int32(len(w)))
-        params = net.init(jax.random.PRNGKey(args.seed), jnp.zeros((1, O)), jnp.zeros((1, A)))
-        opt = optax.adam(args.learning_rate)
-        opt_state = opt.init(params)
-        balance = 10.0 if rest == ["balanced"] else None
-        block = jax.jit(lambda pr, st, k: reward_model_updates(
-            apply, opt, pr, st, ring, (o[:1], a[:1], w[:1], h[:1]), k, 0, 1000, 64, 1, balance)[:2])
-        for i in range(args.updates // 1000):
-            params, opt_state = block(params, opt_state, jax.random.PRNGKey(1000 + i))
+        balance = 10.0 if "balanced" in rest else None
+        w_ev = w_ev.astype(np.float32)
+        for em_round in range(1 + (args.em_rounds if "em" in rest else 0)):
+            if em_round:
+                agree = args.em_temperature * target * np.asarray(jax.jit(apply)(params, ev_obs, ev_act)).reshape(E, K)
+                post = np.exp(agree - agree.max(1, keepdims=True)) * w_ev
+                w_ev = post / np.maximum(post.sum(1, keepdims=True), 1e-12) * w_ev.sum(1, keepdims=True)
+            params = fit_rows(args, net, apply, O, A, balance, (ev_obs, si_obs), (ev_act, si_act),
+                              (w_ev.reshape(-1), w_si), (h_ev, h_si))
         results[spec] = {"r_hat_corr_test": corr(params, test), "r_hat_corr_late_training": corr(params, late)}
         print(json.dumps({"variant": spec, **{k: round(v, 3) for k, v in results[spec].items()},
                           "test_r_hat_by_score": group_means(params, test)}), flush=True)
     return results
+
+
+def fit_rows(args, net, apply, O, A, balance, *columns):
+    """A fresh bounded model fitted on the rows (obs, action, weight, target), each given as parts to join."""
+    from mjx_protamer.human.batched import FeedbackRing, reward_model_updates
+
+    rows = [np.concatenate(parts).astype(np.float32) for parts in columns]
+    keep = rows[2] > 0
+    o, a, w, h = (jnp.asarray(r[keep]) for r in rows)
+    ring = FeedbackRing(o, a, w, h, jnp.int32(0), jnp.int32(len(w)))
+    params = net.init(jax.random.PRNGKey(args.seed), jnp.zeros((1, O)), jnp.zeros((1, A)))
+    opt = optax.adam(args.learning_rate)
+    opt_state = opt.init(params)
+    block = jax.jit(lambda pr, st, k: reward_model_updates(
+        apply, opt, pr, st, ring, (o[:1], a[:1], w[:1], h[:1]), k, 0, 1000, 64, 1, balance)[:2])
+    for i in range(args.updates // 1000):
+        params, opt_state = block(params, opt_state, jax.random.PRNGKey(1000 + i))
+    return params
 
 
 def main() -> None:
@@ -225,6 +243,8 @@ def main() -> None:
     f.add_argument("--learning-rate", type=float, default=1e-3)
     f.add_argument("--hidden", type=int, nargs="+", default=[256, 256])
     f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--em-rounds", type=int, default=2, help="variants ending :em: reweight-and-refit rounds")
+    f.add_argument("--em-temperature", type=float, default=3.0)
     args = parser.parse_args()
     collect(args) if args.cmd == "collect" else fit(args)
 

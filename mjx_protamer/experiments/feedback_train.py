@@ -56,7 +56,7 @@ from jax.sharding import PartitionSpec as P
 from mjx_protamer.config import ConfigError, check
 from mjx_protamer.human.batched import (FeedbackRing, draw_credited_steps, draw_silent_steps, reward_model_updates,
                                         ring_add, ring_init)
-from mjx_protamer.human.credit import CreditConfig, lag_weights
+from mjx_protamer.human.credit import CreditConfig, lag_weights, posterior_weights
 from mjx_protamer.human.reward_model import reward_nets
 from mjx_protamer.human.teachers import (BatchedTeacherState, TeacherConfig, batched_teacher, batched_teacher_init,
                                          env_signal_columns, rule_signals, with_channel)
@@ -249,7 +249,11 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         seen_act = jnp.concatenate([fs.history.action, action])
         c_obs = seen_obs[H + rel, b_idx[:, None]].reshape(E * K, obs_size)
         c_act = seen_act[H + rel, b_idx[:, None]].reshape(E * K, act_size)
-        w = ok.astype(jnp.float32).reshape(-1)
+        w = ok.astype(jnp.float32)
+        if fc.credit.posterior_temperature > 0:  # the model's agreement moves each event's weight among its rows
+            w = posterior_weights(jnp, w, target, apply(fs.rm_params, c_obs, c_act).reshape(E, K),
+                                  fc.credit.posterior_temperature)
+        w = w.reshape(-1)
         h = target.reshape(-1)
         seen_arrived = jnp.concatenate([fs.history.arrived, valid])
         seen_watching = jnp.concatenate([fs.history.watching, out["watching"]])

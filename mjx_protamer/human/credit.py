@@ -16,6 +16,14 @@ Three schemes (`CreditConfig.scheme`):
   so the probability that feedback at time t is about step i, which spans [s_i, e_i), is
   |[s_i, e_i) ∩ [t - 4.0, t - 0.2]| / 3.8. Steps with weight 0 are not credited.
 
+With `posterior_temperature` T > 0 (any scheme) an event's weights are then reweighted by how well the
+current reward model agrees with it: w_i exp(T v r_hat_i), renormalised to the event's total
+(`posterior_weights`). The delay distribution is the prior over which step the teacher judged; the model's
+rating is the likelihood that the teacher would say v about step i; the product is the posterior, an
+online EM step. Why: within a praised stretch, the short gaps between touches get the praise around them
+from the delay's spread (docs/experiments.md, "Where r_hat errs on the learner's own test states"); the
+posterior moves an event's weight onto the steps that look like what it praised.
+
 The event's time is `t_start`: the onset of the key press or of the utterance (the reaction), not the
 end of a long sentence. Either scheme accepts at most one event per `min_interval_steps` (the authors'
 "feedback accepted at most every 5 steps"), measured between the steps the events land on; a dropped
@@ -51,8 +59,10 @@ class CreditConfig:
     silence_weight: float = 0.0
     # a silent step is a 0 label only if the teacher watched every step whose feedback could have credited it:
     # silence while looking away is not "nothing to say" (docs/experiments.md, "What limits r_hat"). Needs an
-    # attention signal: the simulated teachers' (not in their silent mode); live sessions have none yet.
+    # attention signal: the simulated teachers' (not in their silent mode), a live session's page visibility.
     silence_needs_attention: bool = False
+    # > 0: an event's credit weights times exp(T value r_hat), renormalised (`posterior_weights`); 0: the prior
+    posterior_temperature: float = 0.0
 
     def validate(self) -> None:
         check(self.window_steps >= 1, "window_steps", f"must be >= 1, got {self.window_steps}")
@@ -62,6 +72,21 @@ class CreditConfig:
               f"must be > delay_min_s ({self.delay_min_s}), got {self.delay_max_s}")
         check(self.silence_weight >= 0, "silence_weight", f"must be >= 0, got {self.silence_weight}")
         check(self.min_interval_steps >= 0, "min_interval_steps", f"must be >= 0, got {self.min_interval_steps}")
+        check(self.posterior_temperature >= 0, "posterior_temperature",
+              f"must be >= 0 (0: credit by the delay alone), got {self.posterior_temperature}")
+
+
+def posterior_weights(xp, weight, value, r_hat, temperature: float):
+    """An event's credit weights (..., K) over its steps, times exp(temperature * value * r_hat) and
+    renormalised to the same total per event (the last axis): the posterior over which step the event was
+    about, the delay's credit the prior. `xp` is numpy or jax.numpy; temperature 0 returns the weights."""
+    if temperature <= 0:
+        return weight
+    agree = temperature * value * r_hat
+    agree = agree - xp.max(xp.where(weight > 0, agree, -xp.inf), axis=-1, keepdims=True)
+    post = weight * xp.exp(xp.where(weight > 0, agree, 0.0))
+    total = xp.sum(weight, axis=-1, keepdims=True)
+    return post * (total / xp.maximum(xp.sum(post, axis=-1, keepdims=True), 1e-30))
 
 
 def step_window_weights(window: int = 15, decay: float = 0.9) -> np.ndarray:

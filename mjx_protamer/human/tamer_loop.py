@@ -30,7 +30,8 @@ from mjx_protamer.agents.ddpg.config import PretrainConfig
 from mjx_protamer.config import ConfigError, check
 from mjx_protamer.human.attention import AttentionTimeline, describe, is_attention
 from mjx_protamer.human.clock import StepClock, VirtualClock
-from mjx_protamer.human.credit import CreditAssigner, CreditConfig, StepHistory, silence_reach_s
+from mjx_protamer.human.credit import (CreditAssigner, CreditConfig, StepHistory, posterior_weights,
+                                       silence_reach_s)
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
 from mjx_protamer.human.reward_model import RewardModel, RewardModelConfig
 from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, env_signal_columns, rule_signals, with_channel
@@ -193,6 +194,9 @@ class TamerRun:
                     self.log.note(event="not credited", reason=why, t_start=event.t_start, value=event.value)
                 continue
             obs, act, w, h = self.history.samples(credit)
+            if self.use_model and len(w) and self.config.feedback.credit.posterior_temperature > 0:
+                w = posterior_weights(np, w, h, np.asarray(self.model.predict(obs, act)).reshape(-1),
+                                      self.config.feedback.credit.posterior_temperature)
             if self.use_model:
                 self.model.add(obs, act, w, h)
             self.credited += len(w)

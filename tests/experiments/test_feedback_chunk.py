@@ -160,3 +160,39 @@ def test_teach_quiet_puts_the_teachers_on_the_envs_without_noise_only():
     raw["batched"] = {"teach_quiet": True, "teach_envs": 2}
     with pytest.raises(ConfigError, match="teach_envs"):
         build(raw)
+
+
+def test_posterior_credit_moves_each_events_weight_by_the_models_agreement(setup):
+    """`credit.posterior_temperature` T: the same rows are credited as without it, each event keeps its total
+    weight, and within an event a row's weight is proportional to exp(T v r_hat) under the model the chunk
+    started with (credit.posterior_weights)."""
+    import jax.numpy as jnp
+
+    from mjx_protamer.human.credit import posterior_weights
+
+    cfg0, ft0 = setup
+    raw = toy_feedback_config(num_devices=0)
+    raw["feedback"]["credit"] = {"posterior_temperature": 4.0}
+    cfg, ft = build(raw)
+    fresh = lambda: (ft.trainer.init(jax.random.PRNGKey(0)), ft.init(0))  # a chunk donates its inputs
+    rm_before = jax.device_get(fresh()[1].rm_params)
+    _, post_fs, m, ev = ft.chunk(*fresh(), ft.params("keyboard", cfg.feedback.credit))
+    _, prior_fs, _, _ = ft0.chunk(*fresh(), ft0.params("keyboard", cfg0.feedback.credit))
+    post, prior = jax.device_get(post_fs.ring), jax.device_get(prior_fs.ring)
+    n = int(post.size)
+    assert n == int(prior.size) > 50
+    for field in ("obs", "action", "target"):
+        np.testing.assert_array_equal(getattr(post, field)[:n], getattr(prior, field)[:n])
+    w, w0, h = post.weight[:n], prior.weight[:n], post.target[:n]
+    np.testing.assert_allclose(w.sum(), w0.sum(), rtol=1e-5)
+    assert np.abs(w - w0).max() > 0.05
+    # log w - T v r_hat is the event's normaliser: one value per event
+    r = np.asarray(ft.apply(rm_before, jnp.asarray(post.obs[:n]), jnp.asarray(post.action[:n])))
+    per_event = np.unique(np.round(np.log(w / w0) - 4.0 * h * r, 4))
+    assert len(per_event) <= int(np.sum(ev["present"])) < n / 4
+    # the rule itself: numpy and JAX agree, temperature 0 is the prior, zero weights stay zero
+    wt, v, rh = np.array([[0.2, 0.5, 0.3, 0.0]]), np.ones((1, 4)), np.array([[0.9, -0.2, 0.4, 1.0]])
+    got = posterior_weights(np, wt, v, rh, 2.0)
+    np.testing.assert_allclose(got, np.asarray(posterior_weights(jnp, jnp.asarray(wt), v, rh, 2.0)), rtol=1e-6)
+    np.testing.assert_allclose(got.sum(), 1.0) and np.testing.assert_array_equal(posterior_weights(np, wt, v, rh, 0.0), wt)
+    assert got[0, 3] == 0 and got[0, 0] > wt[0, 0] and got[0, 1] < wt[0, 1]

@@ -66,3 +66,35 @@ def test_the_live_loop_learns_from_the_silences_its_page_watched_and_records_the
     again.step_chunk(t0=t_start + 100 * dt)
     assert again.model.buffer.size == buf.size
     np.testing.assert_array_equal(again.model.buffer.obs[:buf.size], buf.obs[:buf.size])
+
+
+def test_the_host_loop_credits_an_event_by_the_posterior_as_the_in_jit_path_does():
+    """`credit.posterior_temperature` in the live loop: the event's rows are those of the delay's credit, their
+    weights that credit times exp(T v r_hat) under the model before the event, renormalised
+    (credit.posterior_weights, the function the in-jit chunk uses)."""
+    from mjx_protamer.envs.toy import PointReachEnv
+    from mjx_protamer.human.credit import posterior_weights
+    from mjx_protamer.human.tamer_loop import TamerRun, load_feedback_config
+
+    base = ["pretrain.env_name=toy", "pretrain.ddpg.actor_hidden=[16]", "pretrain.ddpg.critic_hidden=[16,16]",
+            "pretrain.train.num_envs=1", "pretrain.train.episode_length=50", "pretrain.train.warmup_env_steps=0",
+            "pretrain.train.chunk_steps=100", "pretrain.train.total_env_steps=400", "feedback.dt=0.05",
+            "feedback.reward_model.hidden=[16]"]
+    runs = []
+    for temperature in (0.0, 4.0):
+        cfg = load_feedback_config(None, base + [f"feedback.credit.posterior_temperature={temperature}"])
+        run = TamerRun(cfg, PointReachEnv(cfg.pretrain.toy), feedback="queue", clock=VirtualClock(start=1000.0))
+        run.step_chunk(t0=1000.0)
+        params_before = run.model.params
+        run.queue.put(FeedbackEvent(1003.0, 1003.0, "keyboard", 1.0, {"key": "+"}))
+        assert len(run.process_events(step=99)) == 1
+        runs.append((run, params_before))
+    (prior, params_before), (post, _) = runs
+    n = prior.model.buffer.size
+    assert n == post.model.buffer.size > 5
+    b0, b1 = prior.model.buffer, post.model.buffer
+    np.testing.assert_array_equal(b0.obs[:n], b1.obs[:n])
+    r_hat = np.asarray(prior.model.apply(params_before, b0.obs[:n], b0.action[:n]))
+    np.testing.assert_allclose(b1.weight[:n], posterior_weights(np, b0.weight[:n], b0.target[:n], r_hat, 4.0),
+                               rtol=1e-5)
+    assert np.abs(b1.weight[:n] - b0.weight[:n]).max() > 1e-3
