@@ -395,14 +395,20 @@ def _fmt(stat: dict, digits: int = 3) -> str:
 
 
 def reward_preset_name(pre) -> str:
-    """'infant', 'paper' or 'custom' for a self-touch run's reward; the env name for another env."""
+    """The self-touch reward's preset ('infant', 'paper') and any fields changed from it, e.g. 'infant (speed_low
+    1.5)', against the preset it differs from least; the env name for another env."""
     if pre.env_name != "self_touch":
         return pre.env_name
     reward = pre.env.reward
-    for name in type(reward).PRESETS:
-        if reward == type(reward).preset(name):
-            return name
-    return "custom"
+
+    def changed(name):
+        base = type(reward).preset(name)
+        return [f"{f.name} {getattr(reward, f.name)}" for f in dataclasses.fields(reward)
+                if getattr(reward, f.name) != getattr(base, f.name)]
+
+    name = min(type(reward).PRESETS, key=lambda n: len(changed(n)))
+    diff = changed(name)
+    return f"{name} ({', '.join(diff)})" if diff else name
 
 
 def format_markdown(summary: dict) -> str:

@@ -1,4 +1,4 @@
-"""The shipped Table II configs load and validate, and the habituation variant differs where it says."""
+"""The shipped Table II configs load and validate, and the variants differ where they say."""
 
 from pathlib import Path
 
@@ -11,7 +11,8 @@ from mjx_protamer.experiments.table2 import load_table2_config
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 
-@pytest.mark.parametrize("name", ["table2.yaml", "table2_paper.yaml", "table2_habituation.yaml"])
+@pytest.mark.parametrize("name", ["table2.yaml", "table2_paper.yaml", "table2_habituation.yaml",
+                                  "table2_attention.yaml"])
 def test_shipped_table2_configs_load(name):
     cfg = load_table2_config(CONFIGS / name)
     assert cfg.conditions[0].channel == "none" and [c.name for c in cfg.conditions] == ["DDPG", "DTK", "DTW", "DTP"]
@@ -35,3 +36,26 @@ def test_table2_habituation_is_table2_with_the_documented_changes_only():
     assert hab.conditions == base.conditions and hab.seeds == base.seeds and hab.batched == base.batched
     assert [c.signal for c in hab.feedback.teacher.rule] == ["obs_norm:26:52", "obs_norm:0:26"]
     assert [c.value for c in hab.feedback.teacher.rule] == [1.0, -1.0]
+
+
+def test_table2_attention_is_table2_habituation_with_the_credit_changes_only():
+    """Watched silences as full 0 labels, unbalanced signs and the posterior credit: everything else equals
+    configs/table2_habituation.yaml, so its baseline is the same baseline and the two tables compare."""
+    import dataclasses
+
+    hab = load_table2_config(CONFIGS / "table2_habituation.yaml")
+    att = load_table2_config(CONFIGS / "table2_attention.yaml")
+    assert att.feedback.credit == dataclasses.replace(hab.feedback.credit, silence_weight=1.0,
+                                                      silence_needs_attention=True, posterior_temperature=3.0)
+    assert att.feedback.reward_model == dataclasses.replace(hab.feedback.reward_model, balance_signs=False)
+    assert att.pretrain == hab.pretrain and att.feedback.teacher == hab.feedback.teacher
+    assert att.conditions == hab.conditions and att.seeds == hab.seeds and att.batched == hab.batched
+
+
+def test_table_names_the_reward_preset_and_what_a_config_changed_in_it():
+    from mjx_protamer.experiments.table2 import reward_preset_name
+
+    names = {n: reward_preset_name(load_table2_config(CONFIGS / n).pretrain)
+             for n in ("table2.yaml", "table2_paper.yaml", "table2_habituation.yaml")}
+    assert names == {"table2.yaml": "infant", "table2_paper.yaml": "paper",
+                     "table2_habituation.yaml": "infant (speed_low 1.5)"}
