@@ -9,7 +9,10 @@ than from the classes' means. A compliant policy's test states are nearly all of
 within it costs much correlation. Also: how much of each score lies in runs shorter than the teacher's noticing
 time (the rule's longest `sustain`), the median length of the runs its states lie in, and the correlation with a "perceivable" score in which such runs take
 the score of the run before them (a teacher who notices a touch after 0.1 s cannot judge a 50 ms lift of the
-hand): a diagnostic beside the issue's metric, not a replacement.
+hand): a diagnostic beside the issue's metric, not a replacement. Where the rule reads only the observation and
+the action (e.g. the lateral rule's touch norms), `by_clauses_held` splits the states further by which clauses
+hold ("c0+c1": both hands touching, score 0 under the lateral rule; "none": no clause), with r_hat's mean there:
+which states of one score the model over-rates.
 
     .venv/bin/python scripts/r_hat_on_test_states.py runs/table2 [--condition DTK]
 """
@@ -48,6 +51,23 @@ def perceivable(score_episode: np.ndarray, min_samples: int) -> np.ndarray:
     return out
 
 
+def clause_cells(rule, obs, action) -> np.ndarray | None:
+    """A label per state naming the clauses that hold there ("c0", "c0+c1", "none"), or None when a clause
+    reads something the saved test states lack (reward terms, body regions)."""
+    from mjx_protamer.config import ConfigError
+    from mjx_protamer.human.teachers import rule_signals, signal_columns
+
+    try:
+        cols = signal_columns([c.signal for c in rule], (), obs.shape[-1], action.shape[-1])
+    except ConfigError:
+        return None
+    sig = rule_signals(cols, obs, action, None, xp=np)
+    held = np.stack([(sig[..., i] > (-np.inf if c.above is None else c.above))
+                     & (sig[..., i] < (np.inf if c.below is None else c.below)) for i, c in enumerate(rule)], -1)
+    names = np.array(["+".join(f"c{i}" for i in np.flatnonzero(h)) or "none" for h in held.reshape(-1, len(rule))])
+    return names.reshape(held.shape[:-1])
+
+
 def main(argv=None) -> int:
     from mjx_protamer.experiments import checkpoints
     from mjx_protamer.experiments.table2 import STATE_STRIDE, load_table2_config
@@ -72,6 +92,7 @@ def main(argv=None) -> int:
     per_episode = cfg.pretrain.train.episode_length // STATE_STRIDE  # the samples are whole episodes in order
     notice = max(c.sustain for c in cfg.feedback.teacher.rule)
     min_samples = max(1, -(-notice // STATE_STRIDE))
+    cells = clause_cells(cfg.feedback.teacher.rule, obs, action)
     for i, seed in enumerate(cfg.seeds):
         r, s = r_hat[i], score[i]
         classes = {}
@@ -92,12 +113,18 @@ def main(argv=None) -> int:
                                     "in_runs_shorter_than_noticing": round(float(short[m].mean()), 3),
                                     "median_run_s": round(float(np.median(run_len[m])) * sample_s, 3)}
             class_mean[m] = r[m].mean()
+        by_cell = None if cells is None else {
+            str(c): {"fraction": round(float((cells[i] == c).mean()), 3), "score": float(s[cells[i] == c][0]),
+                     "r_hat_mean": round(float(r[cells[i] == c].mean()), 3),
+                     "r_hat_std": round(float(r[cells[i] == c].std()), 3)}
+            for c in np.unique(cells[i])}
         rnd = lambda x: None if x is None else round(x, 3)
         print(json.dumps({"seed": seed, "states": int(len(s)), "score_std": round(float(s.std()), 3),
                           "r_hat_corr_test": rnd(corr(r, s)),
                           "corr_without_spread_within_score": rnd(corr(class_mean, s)),
                           "corr_with_perceivable_score": rnd(corr(r, seen)),
-                          "noticing_steps": notice, "by_score": classes}))
+                          "noticing_steps": notice, "by_score": classes,
+                          "by_clauses_held": by_cell}))
     return 0
 
 

@@ -24,3 +24,17 @@ def test_a_lift_shorter_than_noticing_takes_the_touch_around_it_and_a_long_one_s
     assert seen.tolist() == [0, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0]
     assert script.corr(np.array([0.0, 1.0]), np.array([0.0, 2.0])) == 1.0
     assert script.corr(np.ones(3), np.arange(3.0)) is None
+
+
+def test_states_split_by_the_clauses_that_hold_and_rules_reading_regions_are_skipped():
+    from mjx_protamer.human.teachers import Clause
+
+    lateral = (Clause("obs_norm:2:4", 1.0, above=0.05), Clause("obs_norm:0:2", -1.0, above=0.05))
+    obs = np.zeros((2, 3, 4), np.float32)  # (seeds, states, obs)
+    obs[0, 0, 2] = 1.0  # right only
+    obs[0, 1, [0, 3]] = 1.0  # both hands
+    obs[1, 2, 1] = 0.04  # a left-hand graze below the clause's threshold: no clause holds
+    cells = script.clause_cells(lateral, obs, np.zeros((2, 3, 1), np.float32))
+    assert cells.tolist() == [["c0", "c0+c1", "none"], ["none", "none", "none"]]
+    head = (Clause("region:head", 1.0, above=0.5),)
+    assert script.clause_cells(head, obs, np.zeros((2, 3, 1), np.float32)) is None
