@@ -55,15 +55,14 @@ def clause_cells(rule, obs, action) -> np.ndarray | None:
     """A label per state naming the clauses that hold there ("c0", "c0+c1", "none"), or None when a clause
     reads something the saved test states lack (reward terms, body regions)."""
     from mjx_protamer.config import ConfigError
-    from mjx_protamer.human.teachers import rule_signals, signal_columns
+    from mjx_protamer.human.teachers import clauses_hold, rule_signals, signal_columns
 
     try:
         cols = signal_columns([c.signal for c in rule], (), obs.shape[-1], action.shape[-1])
     except ConfigError:
         return None
     sig = rule_signals(cols, obs, action, None, xp=np)
-    held = np.stack([(sig[..., i] > (-np.inf if c.above is None else c.above))
-                     & (sig[..., i] < (np.inf if c.below is None else c.below)) for i, c in enumerate(rule)], -1)
+    held = clauses_hold(rule, sig, xp=np)
     names = np.array(["+".join(f"c{i}" for i in np.flatnonzero(h)) or "none" for h in held.reshape(-1, len(rule))])
     return names.reshape(held.shape[:-1])
 

@@ -149,11 +149,9 @@ def teacher_step(config: TeacherConfig, dt: float, state: TeacherState, signals:
                  key: jax.Array) -> tuple[TeacherState, Decision]:
     """One step of one teacher: `signals` (C,) in `config.signals` order."""
     rule, ch = config.rule, config.channel
-    above = jnp.asarray([-jnp.inf if c.above is None else c.above for c in rule])
-    below = jnp.asarray([jnp.inf if c.below is None else c.below for c in rule])
     values = jnp.asarray([c.value for c in rule])
     sustain = jnp.asarray([c.sustain for c in rule])
-    runs = jnp.where((signals > above) & (signals < below), state.runs + 1, 0)
+    runs = jnp.where(clauses_hold(rule, signals), state.runs + 1, 0)
     score = rule_scores(config, signals)
     noticed = jnp.clip(jnp.sum(jnp.where(runs >= sustain, values, 0.0)), -1.0, 1.0)
 
@@ -186,11 +184,15 @@ def teacher_step(config: TeacherConfig, dt: float, state: TeacherState, signals:
 def rule_scores(config: TeacherConfig, signals: jax.Array) -> jax.Array:
     """The hidden score of every step, signals (..., C) -> (...): what the teacher wants of that step, whether or
     not it notices or gives feedback (the `teacher_score` metric of test episodes)."""
-    rule = config.rule
-    above = jnp.asarray([-jnp.inf if c.above is None else c.above for c in rule])
-    below = jnp.asarray([jnp.inf if c.below is None else c.below for c in rule])
-    values = jnp.asarray([c.value for c in rule])
-    return jnp.clip(jnp.sum(jnp.where((signals > above) & (signals < below), values, 0.0), axis=-1), -1.0, 1.0)
+    values = jnp.asarray([c.value for c in config.rule])
+    return jnp.clip(jnp.sum(jnp.where(clauses_hold(config.rule, signals), values, 0.0), axis=-1), -1.0, 1.0)
+
+
+def clauses_hold(rule: tuple[Clause, ...], signals, xp=jnp):
+    """Whether each clause's condition holds, signals (..., C) -> (..., C) bool: above < signal < below."""
+    above = xp.asarray([-xp.inf if c.above is None else c.above for c in rule])
+    below = xp.asarray([xp.inf if c.below is None else c.below for c in rule])
+    return (signals > above) & (signals < below)
 
 
 def _scan_decisions(config: TeacherConfig, dt: float, state: TeacherState, signals: jax.Array, key: jax.Array):
