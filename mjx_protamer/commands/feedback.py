@@ -353,7 +353,8 @@ def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, fe
     ddpg = dataclasses.replace(pre.ddpg, replay_size=max(pre.ddpg.batch_size, 20_000, chunk_steps),
                                lr_final_fraction=1.0)
     config = FeedbackRunConfig(pretrain=dataclasses.replace(pre, train=train, ddpg=ddpg),
-                               feedback=dataclasses.replace(fb, watch_env=0))
+                               feedback=dataclasses.replace(fb, watch_env=0, reward_model=dataclasses.replace(
+                                   fb.reward_model, lr_final_fraction=1.0)))
     run = TamerRun(config, env, feedback=feedback_mode, queue=queue, log_path=out / "feedback.jsonl")
     if args.resume:  # the session's own single-env state: learner, env, replay, noise
         run.state = loaded

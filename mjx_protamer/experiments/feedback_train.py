@@ -60,6 +60,7 @@ from mjx_protamer.human.credit import CreditConfig, lag_weights, posterior_weigh
 from mjx_protamer.human.reward_model import reward_nets
 from mjx_protamer.human.teachers import (BatchedTeacherState, TeacherConfig, batched_teacher, batched_teacher_init,
                                          env_signal_columns, rule_signals, with_channel)
+from mjx_protamer.step_size import decay_scale
 
 KINDS = ("keyboard", "prosody", "speech")
 
@@ -273,7 +274,9 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         p, o, losses, live = reward_model_updates(nets.fit, opt, fs.rm_params, fs.rm_opt_state, ring,
                                                   (c_obs, c_act, w, h), k_fresh, n_fresh, n_replay,
                                                   rmc.batch_size, rmc.replay_min_rows,
-                                                  rmc.balance_max if rmc.balance_signs else None)
+                                                  rmc.balance_max if rmc.balance_signs else None,
+                                                  decay_scale(it0, tc.iterations, rmc.lr_decay_from,
+                                                              rmc.lr_final_fraction))
         n_live = jnp.sum(live)
 
         # diagnostics: r_hat on the chunk's steps (all envs), and how it tracks the hidden score

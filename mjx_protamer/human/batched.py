@@ -79,11 +79,12 @@ def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int
 
 def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRing", fresh_rows, key,
                          n_fresh: int, n_replay: int, batch_size: int, replay_min_rows: int,
-                         balance_max: float | None = None):
+                         balance_max: float | None = None, scale=1.0):
     """`n_fresh` minibatch steps on the newly credited rows (drawn among those with weight > 0: Deep TAMER
     updates on every feedback), then `n_replay` on uniform draws from the feedback ring (none until it holds
     `replay_min_rows`). A step whose minibatch has no weight leaves params and optimiser state unchanged.
     With `balance_max`, praise and reproach weigh the same (`reward_model.sign_factors` over the ring).
+    `scale` multiplies every update (the run's step-size decay, step_size.decay_scale).
     Returns (params, opt_state, losses (n,), live (n,))."""
     obs, action, weight, target = fresh_rows
     min_rows = min(replay_min_rows, ring.obs.shape[0])
@@ -103,6 +104,7 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
         loss, g = jax.value_and_grad(weighted_loss)(p, apply, bo, ba, bw, bh)
         u, new_o = optimizer.update(g, o, p)
         live = jnp.sum(bw) > 0
+        u = jax.tree.map(lambda x: x * scale, u)
         p = jax.tree.map(lambda a, b: jnp.where(live, a, b), optax.apply_updates(p, u), p)
         o = jax.tree.map(lambda a, b: jnp.where(live, a, b), new_o, o)
         return (p, o), (loss, live)

@@ -54,6 +54,17 @@ class RewardModelConfig:
     # (Lakshminarayanan et al. 2017, deep ensembles; pessimism as in conservative model-based RL).
     ensemble: int = 1
     pessimism: float = 0.0
+    # Step-size decay over a batched run (experiments/feedback_train.py; step_size.decay_scale), as DDPG's:
+    # 1 until `lr_decay_from` of the run, then linear to `lr_final_fraction`. Late in a run a compliant learner
+    # draws nearly one label, and the full rate lets the last minibatches move r_hat on the states of the same
+    # score apart. A live session is open-ended and runs at the full rate (commands/feedback.py).
+    lr_final_fraction: float = 1.0
+    lr_decay_from: float = 0.5
+    # The observation enters as asinh(obs): about obs near 0, about log(2 |obs|) far out. The touch features are
+    # forces in newtons (0 to about 50 N, a hand's spread 3-9 N); raw, a 20 N press by one hand swamps a 0.5 N
+    # touch by the other, and a rule on whether each hand touches sees the two as one state
+    # (docs/experiments.md, "Measured: the reward model's input scale"). False: the raw observation.
+    asinh_obs: bool = False
 
     def validate(self) -> None:
         check(self.balance_max >= 1, "balance_max", f"must be >= 1, got {self.balance_max}")
@@ -68,8 +79,16 @@ class RewardModelConfig:
         check(self.replay_min_rows >= 1, "replay_min_rows", f"must be >= 1, got {self.replay_min_rows}")
         check(self.ensemble >= 1, "ensemble", f"must be >= 1 (members), got {self.ensemble}")
         check(self.pessimism >= 0, "pessimism", f"must be >= 0, got {self.pessimism}")
+        check(0.0 < self.lr_final_fraction <= 1.0, "lr_final_fraction",
+              f"must be in (0, 1] (1 = a constant step size), got {self.lr_final_fraction}")
+        check(0.0 <= self.lr_decay_from < 1.0, "lr_decay_from",
+              f"must be in [0, 1) (the share of the run before the decay starts), got {self.lr_decay_from}")
         check(self.pessimism == 0 or self.ensemble >= 2, "pessimism",
               f"needs an ensemble to measure disagreement: set ensemble >= 2 (got {self.ensemble}) or pessimism 0")
+
+
+def model_input(obs: jax.Array, action: jax.Array, asinh_obs: bool) -> jax.Array:
+    return jnp.concatenate([jnp.arcsinh(obs) if asinh_obs else obs, action], axis=-1)
 
 
 class _Head(nn.Module):
@@ -89,10 +108,11 @@ class RewardMLP(nn.Module):
     hidden: Sequence[int] = (256, 256)
     bounded: bool = False
     ensemble: int = 1
+    asinh_obs: bool = False
 
     @nn.compact
     def __call__(self, obs: jax.Array, action: jax.Array) -> jax.Array:
-        x = jnp.concatenate([obs, action], axis=-1)
+        x = model_input(obs, action, self.asinh_obs)
         if self.ensemble > 1:
             members = nn.vmap(_Head, variable_axes={"params": 0}, split_rngs={"params": True}, in_axes=None,
                               out_axes=0, axis_size=self.ensemble)
@@ -105,11 +125,11 @@ class RewardMLP(nn.Module):
 
 @functools.lru_cache(maxsize=None)
 def reward_fn(hidden: tuple[int, ...] = (256, 256), bounded: bool = False, ensemble: int = 1,
-              pessimism: float = 0.0) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
+              pessimism: float = 0.0, asinh_obs: bool = False) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
     """The pure r_hat(params, obs (B, obs), action (B, act)) -> (B,): the model's, or an ensemble's mean less
     `pessimism` x its members' standard deviation. One object per architecture, so jit caches keyed on it stay
     warm."""
-    net = RewardMLP(tuple(hidden), bounded, ensemble)
+    net = RewardMLP(tuple(hidden), bounded, ensemble, asinh_obs)
 
     def apply(params, obs, action):
         out = net.apply(params, obs, action)
@@ -119,11 +139,11 @@ def reward_fn(hidden: tuple[int, ...] = (256, 256), bounded: bool = False, ensem
 
 
 @functools.lru_cache(maxsize=None)
-def fit_fn(hidden: tuple[int, ...] = (256, 256), bounded: bool = False,
-           ensemble: int = 1) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
+def fit_fn(hidden: tuple[int, ...] = (256, 256), bounded: bool = False, ensemble: int = 1,
+           asinh_obs: bool = False) -> Callable[[dict, jax.Array, jax.Array], jax.Array]:
     """What the loss fits: (B,) for one model, (ensemble, B) for an ensemble, each member to the labels
     (`weighted_loss` broadcasts the labels over the members and sums their losses)."""
-    net = RewardMLP(tuple(hidden), bounded, ensemble)
+    net = RewardMLP(tuple(hidden), bounded, ensemble, asinh_obs)
     return lambda params, obs, action: net.apply(params, obs, action)
 
 
@@ -136,9 +156,9 @@ class RewardNets(NamedTuple):
 def reward_nets(config: "RewardModelConfig") -> RewardNets:
     """The one place a reward-model config becomes networks (feedback_train, RewardModel, scripts)."""
     hidden = tuple(config.hidden)
-    return RewardNets(RewardMLP(hidden, config.bounded, config.ensemble),
-                      reward_fn(hidden, config.bounded, config.ensemble, config.pessimism),
-                      fit_fn(hidden, config.bounded, config.ensemble))
+    return RewardNets(RewardMLP(hidden, config.bounded, config.ensemble, config.asinh_obs),
+                      reward_fn(hidden, config.bounded, config.ensemble, config.pessimism, config.asinh_obs),
+                      fit_fn(hidden, config.bounded, config.ensemble, config.asinh_obs))
 
 
 def sign_factors(xp, weight, target, max_factor: float):

@@ -38,16 +38,18 @@ def test_table2_habituation_is_table2_with_the_documented_changes_only():
     assert [c.value for c in hab.feedback.teacher.rule] == [1.0, -1.0]
 
 
-def test_table2_attention_is_table2_habituation_with_the_credit_changes_only():
-    """Watched silences as full 0 labels, unbalanced signs and the posterior credit: everything else equals
-    configs/table2_habituation.yaml, so its baseline is the same baseline and the two tables compare."""
+def test_table2_attention_is_table2_habituation_with_the_credit_and_model_input_changes_only():
+    """Watched silences as full 0 labels, unbalanced signs, the posterior credit and asinh inputs to the reward
+    model: everything else equals configs/table2_habituation.yaml, so its baseline is the same baseline and the
+    two tables compare."""
     import dataclasses
 
     hab = load_table2_config(CONFIGS / "table2_habituation.yaml")
     att = load_table2_config(CONFIGS / "table2_attention.yaml")
     assert att.feedback.credit == dataclasses.replace(hab.feedback.credit, silence_weight=1.0,
                                                       silence_needs_attention=True, posterior_temperature=3.0)
-    assert att.feedback.reward_model == dataclasses.replace(hab.feedback.reward_model, balance_signs=False)
+    assert att.feedback.reward_model == dataclasses.replace(hab.feedback.reward_model, balance_signs=False,
+                                                            asinh_obs=True)
     assert att.pretrain == hab.pretrain and att.feedback.teacher == hab.feedback.teacher
     assert att.conditions == hab.conditions and att.seeds == hab.seeds and att.batched == hab.batched
 

@@ -128,3 +128,27 @@ def test_balanced_updates_in_jit_weigh_rare_reproach_like_praise():
         rated[balance] = np.asarray(apply(new, probe, jnp.zeros((2, 1))))
     assert rated[10.0][0] < rated[None][0] - 0.25, rated  # measured: -0.35 plain, -0.72 balanced
     assert rated[10.0][1] > 0.5, rated
+
+
+def test_the_runs_step_size_decay_scales_each_reward_model_update():
+    """`scale` (step_size.decay_scale at the chunk's iteration) multiplies Adam's step: one update at scale 0.25
+    moves every parameter a quarter as far as at 1; the schedule is 1 before `decay_from`, then linear to the
+    final fraction at the run's last iteration."""
+    from mjx_protamer.step_size import decay_scale
+
+    apply = reward_fn((32,))
+    params = RewardMLP((32,)).init(jax.random.PRNGKey(0), jnp.zeros((1, 2)), jnp.zeros((1, 1)))
+    opt = optax.adam(1e-2)
+    obs = jax.random.normal(jax.random.PRNGKey(1), (64, 2))
+    rows = (obs, jnp.zeros((64, 1)), jnp.ones(64), jnp.sign(obs[:, 0]))
+    ring = ring_init(256, 2, 1)
+    moved = {s: jax.tree.map(lambda a, b: np.asarray(a) - np.asarray(b),
+                             reward_model_updates(apply, opt, params, opt.init(params), ring, rows,
+                                                  jax.random.PRNGKey(2), 1, 0, 32, 64, None, s)[0], params)
+             for s in (1.0, 0.25)}
+    for full, quarter in zip(jax.tree.leaves(moved[1.0]), jax.tree.leaves(moved[0.25])):
+        np.testing.assert_allclose(quarter, 0.25 * full, rtol=1e-3, atol=1e-7)  # float32 rounding of p + u
+    assert np.abs(jax.tree.leaves(moved[1.0])[0]).max() > 1e-3  # the update moved something
+    got = [float(decay_scale(i, 100, 0.5, 0.1)) for i in (0, 50, 75, 100, 200)]
+    np.testing.assert_allclose(got, [1.0, 1.0, 0.55, 0.1, 0.1], rtol=1e-6)
+    assert float(decay_scale(99, 100, 0.5, 1.0)) == 1.0

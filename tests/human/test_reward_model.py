@@ -162,3 +162,38 @@ def test_an_ensemble_fits_every_member_and_pessimism_lowers_r_hat_where_they_dis
 def test_pessimism_without_an_ensemble_is_refused():
     with pytest.raises(ConfigError, match="ensemble"):
         from_dict(RewardModelConfig, {"pessimism": 0.5})
+
+
+@pytest.mark.parametrize("field,value", [("lr_final_fraction", 0.0), ("lr_final_fraction", 1.5),
+                                         ("lr_decay_from", 1.0)])
+def test_a_reward_model_step_size_decay_out_of_range_is_refused(field, value):
+    with pytest.raises(ConfigError, match=field):
+        from_dict(RewardModelConfig, {field: value})
+
+
+def test_asinh_inputs_tell_a_light_touch_of_one_hand_under_a_hard_press_of_the_other():
+    """`asinh_obs`: the lateral rule's two-handed states (a 5-50 N press by the right hand, 0.2-1 N by the left:
+    score 0) against the right hand alone (+1). On raw newtons the light touch is a small shift beside the
+    press's spread; on asinh(obs) it is a step of the same order, and the same 100 minibatches separate the two
+    far better (measured: corr 0.62 raw, 0.84 asinh; 0.86 and 0.94 after 300). The transform is inside the
+    params' function: the host model, the in-jit fit and checkpoints share it."""
+    rng = np.random.default_rng(0)
+
+    def states(n):
+        obs = np.zeros((n, OBS), np.float32)
+        obs[:, 0] = rng.uniform(5, 50, n)
+        left = rng.random(n) < 0.5
+        obs[:, 1] = np.where(left, rng.uniform(0.2, 1.0, n), 0.0)
+        return obs, np.zeros((n, ACT), np.float32), np.where(left, 0.0, 1.0).astype(np.float32)
+
+    train, test = states(2048), states(1000)
+    corr = {}
+    for asinh in (False, True):
+        model = RewardModel(RewardModelConfig(hidden=(32, 32), bounded=True, asinh_obs=asinh, replay_every=0),
+                            OBS, ACT, seed=0)
+        model.add(*train[:2], np.ones(2048, np.float32), train[2], update=False)
+        model.replay(100)
+        corr[asinh] = np.corrcoef(model.predict(*test[:2]), test[2])[0, 1]
+        net = RewardMLP((32, 32), True, asinh_obs=asinh)
+        np.testing.assert_allclose(model.predict(*test[:2]), net.apply(model.params, *test[:2]), rtol=1e-5, atol=1e-6)
+    assert corr[True] > 0.8 and corr[True] > corr[False] + 0.15, corr

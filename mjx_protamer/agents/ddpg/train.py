@@ -42,6 +42,7 @@ from mjx_protamer.agents.ddpg.networks import Actor, Critic
 from mjx_protamer.config import ConfigError
 from mjx_protamer.envs.base import State
 from mjx_protamer.envs.wrappers import wrap_for_training
+from mjx_protamer.step_size import decay_scale
 
 AXIS = "data"
 
@@ -190,14 +191,8 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         ))
 
     def _step_scale(iteration):
-        """The step-size multiplier at `iteration` (`DDPGConfig.lr_final_fraction`): 1 until `lr_decay_from` of
-        the run, then linear to the final fraction at its last iteration. Adam's step is linear in its
-        learning rate, so scaling the update is the scheduled rate, and the optimizer state keeps its shape."""
-        if dc.lr_final_fraction >= 1.0:
-            return jnp.float32(1.0)
-        start = dc.lr_decay_from * tc.iterations
-        progress = jnp.clip((iteration - start) / max(tc.iterations - start, 1.0), 0.0, 1.0)
-        return (1.0 - progress * (1.0 - dc.lr_final_fraction)).astype(jnp.float32)
+        """The step-size multiplier at `iteration` (`DDPGConfig.lr_final_fraction`, step_size.decay_scale)."""
+        return decay_scale(iteration, tc.iterations, dc.lr_decay_from, dc.lr_final_fraction)
 
     def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params, scale):
         """One DDPG update from a fresh minibatch: critic, then actor against the new critic, then targets."""
