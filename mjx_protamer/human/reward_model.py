@@ -55,13 +55,14 @@ class RewardModelConfig:
     ensemble: int = 1
     pessimism: float = 0.0
     # Step-size decay over a batched run (experiments/feedback_train.py; step_size.decay_scale), as DDPG's:
-    # 1 until `lr_decay_from` of the run, then linear to `lr_final_fraction`. Late in a run a compliant learner
-    # draws nearly one label, and the full rate lets the last minibatches move r_hat on the states of the same
-    # score apart. A live session is open-ended and runs at the full rate (commands/feedback.py).
+    # 1 until `lr_decay_from` of the run, then linear to `lr_final_fraction`. Screened to shrink r_hat's spread
+    # within one score on a compliant learner's states; it did not, that spread is not the optimiser's noise
+    # (docs/experiments.md, "a step-size decay for it"), so no config sets it. A live session is open-ended and
+    # runs at the full rate (commands/feedback.py).
     lr_final_fraction: float = 1.0
     lr_decay_from: float = 0.5
     # The observation enters as asinh(obs): about obs near 0, about log(2 |obs|) far out. The touch features are
-    # forces in newtons (0 to about 50 N, a hand's spread 3-9 N); raw, a 20 N press by one hand swamps a 0.5 N
+    # forces in newtons (0 to about 50 N, std up to 9 N); raw, a 20 N press by one hand swamps a 0.5 N
     # touch by the other, and a rule on whether each hand touches sees the two as one state
     # (docs/experiments.md, "Measured: the reward model's input scale"). False: the raw observation.
     asinh_obs: bool = False
