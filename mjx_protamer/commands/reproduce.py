@@ -26,8 +26,10 @@ def register(subparsers) -> None:
         "figure1_training_reward.png and figure2_unique_regions.png.",
     )
     t.add_argument("--config", type=Path, default=None,
-                   help="YAML (default: the built-in default; configs/table2.yaml is the batched setting, "
-                   "configs/table2_paper.yaml the paper's single-env 20-episode setting)")
+                   help="YAML (default: the built-in default, equal to configs/table2_attention.yaml: "
+                   "habituation, the right-hand rule, asinh reward-model inputs; configs/table2.yaml is the "
+                   "earlier head rule without habituation, configs/table2_paper.yaml the paper's single-env "
+                   "20-episode setting)")
     t.add_argument("--seeds", type=int, default=None, help="run seeds 0..N-1 (default: the config's seeds)")
     t.add_argument("--out", type=Path, default=None, help="output directory (default: runs/table2-<time>)")
     t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",

@@ -94,6 +94,15 @@ SELF_TOUCH_RULE = (
     Clause("region:head", 1.0, above=0.5, sustain=20),  # a hand on the head, noticed after 0.1 s
     Clause("obs_norm:64:68,70:74", -1.0, below=1.0, sustain=60),  # arms frozen (< 1 rad/s), noticed after 0.3 s
 )
+# The rule of `protamer reproduce table2`'s built-in default (configs/table2_attention.yaml): "your right hand,
+# not the left". With habituation the baseline tours its body and touches the head by itself, so the head rule
+# no longer stands out; the hand rule does: the baseline's score is 0.20 +- 0.11 over 5 seeds (it uses both
+# hands), and each hand's touch features (obs 0:26 left, 26:52 right) are visible in (s, a). Both hands at once
+# score 0 (silent). docs/experiments.md, "Table II with habituation".
+LATERAL_RULE = (
+    Clause("obs_norm:26:52", 1.0, above=0.05, sustain=20),  # the right hand touching (> 0.05 N), after 0.1 s
+    Clause("obs_norm:0:26", -1.0, above=0.05, sustain=20),  # the left hand touching
+)
 # (The first version's rule read reward terms: a region onset, which lasts one step, and the joint-limit
 # term, which was active on 100% of training steps; a reward model could not learn it: issue 8.)
 

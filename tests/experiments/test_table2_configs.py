@@ -61,3 +61,23 @@ def test_table_names_the_reward_preset_and_what_a_config_changed_in_it():
              for n in ("table2.yaml", "table2_paper.yaml", "table2_habituation.yaml")}
     assert names == {"table2.yaml": "infant", "table2_paper.yaml": "paper",
                      "table2_habituation.yaml": "infant (speed_low 1.5)"}
+
+
+def test_builtin_default_is_configs_table2_attention_yaml():
+    """`reproduce table2` without --config runs the setting whose table the README reports."""
+    assert load_table2_config() == load_table2_config(CONFIGS / "table2_attention.yaml")
+
+
+def test_overrides_without_a_file_change_only_what_they_name():
+    """--set on the built-in default merges into it: the rest of a section keeps the default's values, not the
+    section class's (the lateral rule and asinh inputs survive a change of the credit's temperature)."""
+    import dataclasses
+
+    base = load_table2_config()
+    cfg = load_table2_config(None, ["feedback.credit.posterior_temperature=6.0",
+                                    "pretrain.train.total_env_steps=32000"], seeds=10)
+    assert cfg.feedback == dataclasses.replace(
+        base.feedback, credit=dataclasses.replace(base.feedback.credit, posterior_temperature=6.0))
+    assert cfg.pretrain == dataclasses.replace(
+        base.pretrain, train=dataclasses.replace(base.pretrain.train, total_env_steps=32000))
+    assert cfg.seeds == tuple(range(10)) and cfg.batched == base.batched and cfg.conditions == base.conditions
