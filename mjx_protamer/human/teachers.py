@@ -20,7 +20,8 @@ Scoring rule (hidden from the learner)
     Region signals let a rule ask where to touch ("touch your head", "touch many places"); the reward model
     still learns from (s, a) only. An env without regions (the toy) rejects them as a config error.
     The default rule (self-touch, `SELF_TOUCH_RULE`): approve touching the head while moving, disapprove a
-    freeze; see there why it is built that way.
+    freeze; see there why it is built that way. `reproduce table2`'s built-in default uses `LATERAL_RULE`
+    (the right hand +1, the left -1), since its baseline habituates and tours, head included.
 
 Giving model
     A step is eligible when every clause that holds has been noticed and |score| >= threshold; the teacher
