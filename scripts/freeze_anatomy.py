@@ -1,0 +1,130 @@
+"""What a frozen test policy is doing: its actions, its servo torques, its touch and its reward model (issue 8).
+
+Reads a finished `protamer reproduce table2 --out DIR` run (config.yaml, test_states_<condition>.npz: every 5th
+step of the test episodes, whole episodes in order; reward_models/<condition>/ where the condition learnt one)
+and prints one JSON line per seed. The test states are split into still (arm speed below the env's
+`freeze_speed`, the freeze metric's own definition) and moving, and for each part it gives:
+- `actions_at_wall`: the share of action dimensions with |a| > 0.95 (tanh(1.83); the actor's pre-tanh wall
+  `ddpg.actor_preact_free` 2 sits at 0.964);
+- `torques_clipped`: the share of the arm actuators' torques (the observation's torque block) at 98% or more
+  of their `forcerange` (`envs/body.py` ARM_JOINTS max_torque). A position servo whose target lies past where
+  the body blocks the arm pushes at its clip, and then no small change of the action changes the physics;
+- `touch_norm`: the L2 norm of the touch features (obs 0:4(k+3));
+- `r_hat`: the reward model the condition learnt, on those states (absent where it has no teacher).
+Also `still_fraction` (the freeze ratio of these samples), `median_still_run_s`, and the share of the still
+steps that lie in stops of at least 0.1 s (what a teacher who notices after 0.1 s can see) and 0.5 s (a held
+pose), against stop-and-go.
+
+    .venv/bin/python scripts/freeze_anatomy.py runs/table2 [--condition DTK]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+WALL = 0.95
+CLIP = 0.98
+STOP_S = (0.1, 0.5)  # the teacher notices a stop after 0.1 s (the rules' sustain 20); 0.5 s is a held pose
+
+
+def runs_of(mask: np.ndarray):
+    """Lengths of the runs of True in a 1-D bool array."""
+    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(padded)
+    return np.flatnonzero(d == -1) - np.flatnonzero(d == 1)
+
+
+def obs_layout(env) -> dict[str, np.ndarray]:
+    """Indices of the observation's blocks (envs/model.py `observe`): touch, arm speed joints, arm torques."""
+    touch = 4 * (env.k + 3)
+    qvel0 = touch + len(env.qpos_joints)
+    torque0 = qvel0 + len(env.qvel_joints)
+    speed = np.array([qvel0 + env.qvel_joints.index(n) for n in env.speed_joints])
+    return {"touch": np.arange(touch), "speed": speed,
+            "torque": torque0 + np.arange(len(env.torque_actuators))}
+
+
+def max_torques(env) -> np.ndarray:
+    from mjx_protamer.envs import body
+
+    out = []
+    for name in env.torque_actuators:
+        joint = name.split("_", 1)[1]
+        out.append(body.ARM_JOINTS[joint].max_torque)
+    return np.asarray(out)
+
+
+def r_hat_of(run: Path, condition: str, cfg, obs, action):
+    """The condition's saved reward models on the states, (seeds, n); None when it learnt none (a condition
+    without a teacher saves the untrained model, for `r_hat_corr_untrained`: not what it learnt)."""
+    learnt = any(c.name == condition and c.channel != "none" for c in cfg.conditions)
+    if not learnt or not (run / "reward_models" / condition).exists():
+        return None
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_protamer.experiments import checkpoints
+    from mjx_protamer.human.reward_model import reward_nets
+
+    nets = reward_nets(cfg.feedback.reward_model)
+    keys = jax.random.split(jax.random.PRNGKey(0), len(obs))
+    like = jax.vmap(lambda k: nets.net.init(k, jnp.zeros((1, obs.shape[-1])), jnp.zeros((1, action.shape[-1]))))(keys)
+    params = checkpoints.restore(checkpoints.manager(run / "reward_models" / condition), 0, like)
+    return np.asarray(jax.jit(jax.vmap(nets.apply))(params, obs, action))
+
+
+def part(mask, action, obs, lay, tmax, r_hat):
+    if not mask.any():
+        return None
+    out = {"actions_at_wall": float((np.abs(action[mask]) > WALL).mean()),
+           "torques_clipped": float((np.abs(obs[mask][:, lay["torque"]]) >= CLIP * tmax).mean()),
+           "touch_norm": float(np.linalg.norm(obs[mask][:, lay["touch"]], axis=1).mean())}
+    if r_hat is not None:
+        out["r_hat"] = float(r_hat[mask].mean())
+    return {k: round(v, 3) for k, v in out.items()}
+
+
+def main(argv=None) -> int:
+    from mjx_protamer.experiments.table2 import STATE_STRIDE, load_table2_config
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path, help="the --out directory of a finished table2 run")
+    ap.add_argument("--condition", default="DTK")
+    args = ap.parse_args(argv)
+    path = args.run / f"test_states_{args.condition}.npz"
+    if not path.is_file():
+        raise SystemExit(f"error: {path} is missing: give the --out directory of a finished table2 run and a "
+                         f"condition it ran (--condition)")
+    cfg = load_table2_config(args.run / "config.yaml")
+    env = cfg.pretrain.env
+    with np.load(path) as f:
+        obs, action = f["obs"], f["action"]
+    lay, tmax = obs_layout(env), max_torques(env)
+    if obs.shape[-1] != env.observation_size:
+        raise SystemExit(f"error: {path} holds {obs.shape[-1]}-dim states but its config.yaml's env observes "
+                         f"{env.observation_size}: the run's files do not belong together")
+    r_hat = r_hat_of(args.run, args.condition, cfg, obs, action)
+    per_episode = cfg.pretrain.train.episode_length // STATE_STRIDE
+    sample_s = STATE_STRIDE * cfg.pretrain.env.physics.timestep
+    for i, seed in enumerate(cfg.seeds):
+        speed = np.linalg.norm(obs[i][:, lay["speed"]], axis=1)
+        still = speed < env.freeze_speed
+        runs = np.concatenate([runs_of(ep) for ep in still.reshape(-1, per_episode)])
+        rh = None if r_hat is None else r_hat[i]
+        print(json.dumps({
+            "seed": seed, "still_fraction": round(float(still.mean()), 3),
+            "median_still_run_s": round(float(np.median(runs)) * sample_s, 3) if len(runs) else None,
+            # the freeze's steps by the length of the stop they lie in: a held pose, or stop-and-go
+            **{f"still_in_stops_of_{t}s_or_more": round(float(runs[runs * sample_s >= t - 1e-9].sum() / max(runs.sum(), 1)), 3)
+               for t in STOP_S},
+            "still": part(still, action[i], obs[i], lay, tmax, rh),
+            "moving": part(~still, action[i], obs[i], lay, tmax, rh)}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
