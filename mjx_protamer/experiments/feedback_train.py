@@ -185,6 +185,9 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         if noisy == B:
             raise ConfigError("config field 'batched.teach_quiet': no env acts without noise; set "
                               "pretrain.ddpg.noise.quiet_fraction > 0 (e.g. 0.25) or teach_quiet false")
+        if config.ddpg.noise.quiet_rotation_steps:
+            raise ConfigError("config field 'batched.teach_quiet': the quiet envs rotate "
+                              "(pretrain.ddpg.noise.quiet_rotation_steps > 0); set it to 0 or teach_quiet false")
         first_taught, teach_envs = noisy, B - noisy
     E = batched.max_events_per_chunk or min(512, teach_envs * -(-T // max(fc.teacher.min_gap_steps, 1)))
     K = batched.rows_per_event

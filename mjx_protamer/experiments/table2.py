@@ -207,7 +207,8 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
         train_s = time.perf_counter() - t0
         results, test_states[cond.name] = evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params, untrained)
         reward_models[cond.name] = fs.rm_params
-        _save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name])
+        _save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name],
+                               {"actor": ts.actor_params, "critic": ts.critic_params})
         for i, seed in enumerate(cfg.seeds):
             ev = results[i]
             last = [r for r in training if r["condition"] == cond.name and r["seed"] == seed][-1]
@@ -249,16 +250,42 @@ def _corr(x: np.ndarray, y: np.ndarray) -> float | None:
 STATE_STRIDE = 5  # every 5th test step (25 ms) is kept for the pooled score: neighbours are near copies
 
 
-def _save_condition_models(out: Path, name: str, rm_params, states: dict) -> None:
+def _save_condition_models(out: Path, name: str, rm_params, states: dict, agents: dict) -> None:
+    """The condition's reward models, its agents (each seed's actor and critic, `agents/<name>/`: what the
+    test episodes ran, for rendering, fine-tuning or diagnosis, e.g. scripts/freeze_anatomy.py) and its
+    sampled test states."""
     import io
 
     from mjx_protamer.experiments import checkpoints
 
     mngr = checkpoints.manager(out / "reward_models" / name, max_to_keep=1)
     checkpoints.save(mngr, 0, jax.device_get(rm_params))
+    checkpoints.save(checkpoints.manager(out / "agents" / name, max_to_keep=1), 0, jax.device_get(agents))
     buf = io.BytesIO()
     np.savez_compressed(buf, **states)
     checkpoints.write_atomic(out / f"test_states_{name}.npz", buf.getvalue())
+
+
+def load_condition_agents(out: Path, cfg: "Table2Config", name: str, obs_size: int, act_size: int):
+    """(actor, critic, params) of a finished condition: the flax modules and {"actor", "critic"} params
+    stacked over the run's seeds, as `run_table2` saved them."""
+    from mjx_protamer.agents.ddpg.networks import Actor, Critic
+    from mjx_protamer.experiments import checkpoints
+
+    path = out / "agents" / name
+    if not path.is_dir():
+        raise ConfigError(f"{path} is missing: give the --out directory of a table2 run that finished condition "
+                          f"{name} (runs before this version did not keep their agents)")
+    dc = cfg.pretrain.ddpg
+    actor, critic = Actor(action_size=act_size, hidden=tuple(dc.actor_hidden)), Critic(hidden=tuple(dc.critic_hidden))
+
+    def init(key):
+        ka, kc = jax.random.split(key)
+        return {"actor": actor.init(ka, jnp.zeros((obs_size,))),
+                "critic": critic.init(kc, jnp.zeros((obs_size,)), jnp.zeros((act_size,)))}
+
+    like = jax.vmap(init)(jax.random.split(jax.random.PRNGKey(0), len(cfg.seeds)))
+    return actor, critic, checkpoints.restore(checkpoints.manager(path), 0, like)
 
 
 def _load_condition_models(out: Path, name: str, like) -> tuple[object, dict]:

@@ -145,3 +145,19 @@ def test_preact_penalty_is_a_wall_past_the_free_band_and_moves_a_saturated_actor
     g = jax.grad(loss)({"pre": pre}, 2.0)["pre"]
     np.testing.assert_allclose(g, [[0.0, 0.0, 0.25, -0.5]], atol=1e-7)  # inside the band: no pull toward 0
     assert np.isclose(float(loss({"pre": pre}, 0.0)), 0.5 * float(jnp.mean(pre**2)))  # free 0: the plain L2
+
+
+def test_quiet_envs_rotate_so_every_env_spends_the_quiet_share_of_its_time_without_noise():
+    from mjx_protamer.agents.ddpg.config import NoiseConfig
+    from mjx_protamer.agents.ddpg.train import noisy_envs_at
+
+    ids = np.arange(8)
+    fixed = NoiseConfig(quiet_fraction=0.25)
+    rotating = NoiseConfig(quiet_fraction=0.25, quiet_rotation_steps=10)
+    quiet = lambda noise, it: np.flatnonzero(~np.asarray(noisy_envs_at(ids, it, 8, noise))).tolist()
+    assert quiet(fixed, 0) == quiet(fixed, 35) == [6, 7]
+    assert quiet(rotating, 0) == quiet(rotating, 9) == [6, 7]
+    assert quiet(rotating, 10) == [4, 5] and quiet(rotating, 25) == [2, 3] and quiet(rotating, 39) == [0, 1]
+    share = np.mean([~np.asarray(noisy_envs_at(ids, it, 8, rotating)) for it in range(40)], axis=0)
+    assert share.tolist() == [0.25] * 8
+    assert quiet(NoiseConfig(quiet_rotation_steps=10), 10) == []  # no quiet share: nothing to rotate

@@ -47,3 +47,20 @@ def test_a_servo_at_its_clip_and_an_action_at_the_wall_are_counted_and_nothing_e
     assert both["torques_clipped"] == 0.5 and both["actions_at_wall"] == 0.25 and "r_hat" not in both
     assert script.part(np.array([False, False]), action, obs, lay, tmax, None) is None
     assert script.runs_of(np.array([1, 1, 0, 1, 0, 0, 1, 1, 1], bool)).tolist() == [2, 1, 3]
+
+
+def test_the_critic_slope_the_actor_feels_is_damped_by_tanh_and_outward_pushes_are_counted():
+    env = EnvConfig()
+    lay, tmax = script.obs_layout(env), script.max_torques(env)
+    obs = np.zeros((2, env.observation_size))
+    action = np.zeros((2, 14))
+    action[0, 0] = 0.99  # at the wall
+    action[1, 0] = -0.99
+    grad = np.zeros((2, 14))
+    grad[:, 0] = 2.0  # Q rises with a[0]: outward for the first state, inward for the second
+    q = np.array([1.0, 3.0])
+    best = np.array([5.0, 3.0])  # a far action the critic rates 4 higher for the first state, none for the second
+    out = script.part(np.array([True, True]), action, obs, lay, tmax, None, (q, grad, best))
+    assert out["q"] == 2.0 and out["q_slope"] == 2.0 and out["q_gain_random"] == 2.0
+    assert out["actor_slope"] == round(2.0 * (1 - 0.99 ** 2), 3)  # tanh passes 2% of the critic's slope
+    assert out["outward_at_wall"] == 0.5

@@ -2,9 +2,12 @@
 
 import json
 
+import jax
 import numpy as np
 import pytest
 import yaml
+
+from mjx_protamer.config import ConfigError
 
 from mjx_protamer.cli import main
 
@@ -47,6 +50,17 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     assert all(v is None or -1 <= v <= 1 for n in c for v in pooled[n])  # None: the score is constant there
     assert pooled["DTK"][0] is not None and pooled["DTK"] != pooled["DDPG"]
     assert c["DTK"]["r_hat_corr_pooled_untrained"] == c["DTP"]["r_hat_corr_pooled_untrained"]
+    # each condition keeps its agents: the saved actors are the ones whose test episodes were scored
+    from mjx_protamer.experiments.table2 import load_condition_agents, load_table2_config
+
+    with np.load(out / "test_states_DTK.npz") as f:
+        obs, action = f["obs"], f["action"]
+    actor, critic, params = load_condition_agents(out, load_table2_config(out / "config.yaml"), "DTK",
+                                                  obs.shape[-1], action.shape[-1])
+    np.testing.assert_allclose(jax.vmap(actor.apply)(params["actor"], obs), action, atol=1e-5)
+    assert np.all(np.isfinite(jax.vmap(critic.apply)(params["critic"], obs, action)))
+    with pytest.raises(ConfigError, match="agents/DTX is missing"):
+        load_condition_agents(out, load_table2_config(out / "config.yaml"), "DTX", obs.shape[-1], action.shape[-1])
     # a run killed after two conditions: --resume keeps what finished and redoes the rest, to the same table
     kept = (out / "condition_DTK.json").read_bytes()
     for name in ("condition_DTW.json", "condition_DTP.json", "table2.json"):

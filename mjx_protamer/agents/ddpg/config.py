@@ -31,9 +31,16 @@ class NoiseConfig:
     # and their returns into the replay (like Ape-X's per-actor exploration levels), and let a simulated
     # teacher judge the behaviour the test measures.
     quiet_fraction: float = 0.0
+    # 0: the same envs stay quiet all run. N > 0: every N steps the quiet block moves on to the next envs, so
+    # each env alternates between the deterministic actor and noise, and noise starts from the states the
+    # deterministic actor leads to: a test policy that holds a press is shown, in training, what leaving it
+    # is worth (the noisy envs never reach that state; docs/experiments.md, "the reproach can be learned").
+    quiet_rotation_steps: int = 0
 
     def validate(self) -> None:
         check(0.0 < self.theta <= 1.0, "theta", f"must be in (0, 1], got {self.theta}")
+        check(self.quiet_rotation_steps >= 0, "quiet_rotation_steps",
+              f"must be >= 0 (0: the quiet envs stay the same), got {self.quiet_rotation_steps}")
         check(self.sigma >= 0.0, "sigma", f"must be >= 0, got {self.sigma}")
         check(0.0 <= self.quiet_fraction < 1.0, "quiet_fraction",
               f"must be in [0, 1) (the share of envs acting without noise), got {self.quiet_fraction}")

@@ -104,8 +104,18 @@ def _strong(tree):
 
 
 def noisy_env_count(num_envs: int, noise) -> int:
-    """How many envs (the first ones) act with exploration noise; the rest act with the deterministic actor."""
+    """How many envs act with exploration noise; the rest act with the deterministic actor."""
     return num_envs - int(round(noise.quiet_fraction * num_envs))
+
+
+def noisy_envs_at(env_ids, iteration, num_envs: int, noise):
+    """Which envs (global ids) act with noise at `iteration`: the first `noisy_env_count` ones, or with
+    `noise.quiet_rotation_steps` N > 0 a quiet block that moves on by its own size every N steps."""
+    noisy = noisy_env_count(num_envs, noise)
+    if noise.quiet_rotation_steps <= 0 or noisy == num_envs:
+        return env_ids < noisy
+    shift = (iteration // noise.quiet_rotation_steps) * (num_envs - noisy)
+    return (env_ids + shift) % num_envs < noisy
 
 
 def resolve_devices(num_devices: int) -> list:
@@ -150,8 +160,6 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
     # The region mask rides beside the transitions for teacher rules, never into the replay (it would grow
     # every row for a signal the learner never reads).
     emit_regions = bool(getattr(env, "region_names", ()))
-    # Envs from index `noisy_envs` on act with the deterministic actor (`noise.quiet_fraction`).
-    noisy_envs = noisy_env_count(tc.num_envs, dc.noise)
 
     def local_key(key):
         """Per-device randomness (env resets, noise, minibatches); the carried key stays replicated."""
@@ -236,7 +244,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         obs = ts.env_state.obs
         noise_state = noise.step(dc.noise, ts.noise_state, local_key(k_noise))
         first = jax.lax.axis_index(axis) * local_envs if sharded else 0
-        noisy = (first + jnp.arange(local_envs) < noisy_envs)[:, None]
+        noisy = noisy_envs_at(first + jnp.arange(local_envs), ts.iteration, tc.num_envs, dc.noise)[:, None]
         explore = jnp.clip(actor.apply(ts.actor_params, obs) + jnp.where(noisy, noise_state, 0.0), -1.0, 1.0)
         uniform = jax.random.uniform(local_key(k_random), explore.shape, minval=-1.0, maxval=1.0)
         action = jnp.where(ts.iteration < warmup_iterations, uniform, explore)
