@@ -26,7 +26,6 @@ pose), against stop-and-go.
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -69,19 +68,13 @@ def max_torques(env) -> np.ndarray:
 def r_hat_of(run: Path, condition: str, cfg, obs, action):
     """The condition's saved reward models on the states, (seeds, n); None when it learnt none (a condition
     without a teacher saves the untrained model, for `r_hat_corr_untrained`: not what it learnt)."""
-    learnt = any(c.name == condition and c.channel != "none" for c in cfg.conditions)
-    if not learnt or not (run / "reward_models" / condition).exists():
+    if not any(c.name == condition and c.channel != "none" for c in cfg.conditions):
         return None
     import jax
-    import jax.numpy as jnp
 
-    from mjx_protamer.experiments import checkpoints
-    from mjx_protamer.human.reward_model import reward_nets
+    from mjx_protamer.experiments.table2 import load_condition_reward_models
 
-    nets = reward_nets(cfg.feedback.reward_model)
-    keys = jax.random.split(jax.random.PRNGKey(0), len(obs))
-    like = jax.vmap(lambda k: nets.net.init(k, jnp.zeros((1, obs.shape[-1])), jnp.zeros((1, action.shape[-1]))))(keys)
-    params = checkpoints.restore(checkpoints.manager(run / "reward_models" / condition), 0, like)
+    nets, params = load_condition_reward_models(run, cfg, condition, obs.shape[-1], action.shape[-1])
     return np.asarray(jax.jit(jax.vmap(nets.apply))(params, obs, action))
 
 
@@ -128,23 +121,14 @@ def part(mask, action, obs, lay, tmax, r_hat, critic=None):
 
 
 def main(argv=None) -> int:
-    from mjx_protamer.experiments.table2 import STATE_STRIDE, load_table2_config
+    from mjx_protamer.experiments.table2 import STATE_STRIDE, finished_condition_cli
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("run", type=Path, help="the --out directory of a finished table2 run")
-    ap.add_argument("--condition", default="DTK")
-    args = ap.parse_args(argv)
-    path = args.run / f"test_states_{args.condition}.npz"
-    if not path.is_file():
-        raise SystemExit(f"error: {path} is missing: give the --out directory of a finished table2 run and a "
-                         f"condition it ran (--condition)")
-    cfg = load_table2_config(args.run / "config.yaml")
+    args, cfg, states = finished_condition_cli(__doc__.splitlines()[0], argv)
     env = cfg.pretrain.env
-    with np.load(path) as f:
-        obs, action = f["obs"], f["action"]
+    obs, action = states["obs"], states["action"]
     lay, tmax = obs_layout(env), max_torques(env)
     if obs.shape[-1] != env.observation_size:
-        raise SystemExit(f"error: {path} holds {obs.shape[-1]}-dim states but its config.yaml's env observes "
+        raise SystemExit(f"error: {args.run} holds {obs.shape[-1]}-dim states but its config.yaml's env observes "
                          f"{env.observation_size}: the run's files do not belong together")
     r_hat = r_hat_of(args.run, args.condition, cfg, obs, action)
     critic = critic_view(args.run, args.condition, cfg, obs, action)

@@ -19,12 +19,10 @@ which states of one score the model over-rates.
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 
@@ -68,25 +66,11 @@ def clause_cells(rule, obs, action) -> np.ndarray | None:
 
 
 def main(argv=None) -> int:
-    from mjx_protamer.experiments import checkpoints
-    from mjx_protamer.experiments.table2 import STATE_STRIDE, load_table2_config
-    from mjx_protamer.human.reward_model import reward_nets
+    from mjx_protamer.experiments.table2 import STATE_STRIDE, finished_condition_cli, load_condition_reward_models
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("run", type=Path, help="the --out directory of a finished table2 run")
-    ap.add_argument("--condition", default="DTK")
-    args = ap.parse_args(argv)
-    states_path = args.run / f"test_states_{args.condition}.npz"
-    if not states_path.is_file():
-        raise SystemExit(f"error: {states_path} is missing: give the --out directory of a finished table2 run "
-                         f"and a condition it ran (--condition)")
-    cfg = load_table2_config(args.run / "config.yaml")
-    with np.load(states_path) as f:
-        obs, action, score = f["obs"], f["action"], f["score"]
-    nets = reward_nets(cfg.feedback.reward_model)
-    keys = jax.random.split(jax.random.PRNGKey(0), len(obs))
-    like = jax.vmap(lambda k: nets.net.init(k, jnp.zeros((1, obs.shape[-1])), jnp.zeros((1, action.shape[-1]))))(keys)
-    params = checkpoints.restore(checkpoints.manager(args.run / "reward_models" / args.condition), 0, like)
+    args, cfg, states = finished_condition_cli(__doc__.splitlines()[0], argv)
+    obs, action, score = states["obs"], states["action"], states["score"]
+    nets, params = load_condition_reward_models(args.run, cfg, args.condition, obs.shape[-1], action.shape[-1])
     r_hat = np.asarray(jax.jit(jax.vmap(nets.apply))(params, obs, action))
     per_episode = cfg.pretrain.train.episode_length // STATE_STRIDE  # the samples are whole episodes in order
     notice = max(c.sustain for c in cfg.feedback.teacher.rule)

@@ -266,6 +266,43 @@ def _save_condition_models(out: Path, name: str, rm_params, states: dict, agents
     checkpoints.write_atomic(out / f"test_states_{name}.npz", buf.getvalue())
 
 
+def load_finished_condition(out: Path, name: str) -> tuple["Table2Config", dict]:
+    """(config, sampled test states) of a finished condition of a table2 run, for the diagnostics in scripts/."""
+    path = out / f"test_states_{name}.npz"
+    if not path.is_file():
+        raise ConfigError(f"{path} is missing: give the --out directory of a finished table2 run and a condition "
+                          f"it ran (--condition)")
+    with np.load(path) as f:
+        states = {k: f[k] for k in f.files}
+    return load_table2_config(out / "config.yaml"), states
+
+
+def finished_condition_cli(description: str, argv=None):
+    """The command line of the diagnostics in scripts/ (`RUN_DIR [--condition DTK]`): (args, config, test
+    states); a run or condition that is not there exits with a one-line error."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("run", type=Path, help="the --out directory of a finished table2 run")
+    ap.add_argument("--condition", default="DTK")
+    args = ap.parse_args(argv)
+    try:
+        return (args, *load_finished_condition(args.run, args.condition))
+    except ConfigError as e:
+        raise SystemExit(f"error: {e}") from None
+
+
+def load_condition_reward_models(out: Path, cfg: "Table2Config", name: str, obs_size: int, act_size: int):
+    """(nets, params) of a finished condition's reward models, stacked over the run's seeds."""
+    from mjx_protamer.experiments import checkpoints
+    from mjx_protamer.human.reward_model import reward_nets
+
+    nets = reward_nets(cfg.feedback.reward_model)
+    keys = jax.random.split(jax.random.PRNGKey(0), len(cfg.seeds))
+    like = jax.vmap(lambda k: nets.net.init(k, jnp.zeros((1, obs_size)), jnp.zeros((1, act_size))))(keys)
+    return nets, checkpoints.restore(checkpoints.manager(out / "reward_models" / name), 0, like)
+
+
 def load_condition_agents(out: Path, cfg: "Table2Config", name: str, obs_size: int, act_size: int):
     """(actor, critic, params) of a finished condition: the flax modules and {"actor", "critic"} params
     stacked over the run's seeds, as `run_table2` saved them."""
