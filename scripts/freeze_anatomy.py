@@ -79,8 +79,8 @@ def r_hat_of(run: Path, condition: str, cfg, obs, action):
 
 
 def critic_view(run: Path, condition: str, cfg, obs, action):
-    """Q(s, a), dQ/da (seeds, n, act) of the condition's saved critics at the states' actions; None without
-    saved agents."""
+    """(Q(s, a) (seeds, n), dQ/da (seeds, n, act), the best Q over RANDOM_ACTIONS uniform actions (seeds, n)) of
+    the condition's saved critics at the states' actions; None without saved agents."""
     if not (run / "agents" / condition).is_dir():
         return None
     import jax
