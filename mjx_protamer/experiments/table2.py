@@ -268,13 +268,18 @@ def _save_condition_models(out: Path, name: str, rm_params, states: dict, agents
 
 def load_finished_condition(out: Path, name: str) -> tuple["Table2Config", dict]:
     """(config, sampled test states) of a finished condition of a table2 run, for the diagnostics in scripts/."""
+    states = _read_test_states(out, name, "give the --out directory of a finished table2 run and a condition it "
+                                          "ran (--condition)")
+    return load_table2_config(out / "config.yaml"), states
+
+
+def _read_test_states(out: Path, name: str, fix: str) -> dict:
+    """The test states `run_table2` sampled for a condition; a missing file is a ConfigError ending in `fix`."""
     path = out / f"test_states_{name}.npz"
     if not path.is_file():
-        raise ConfigError(f"{path} is missing: give the --out directory of a finished table2 run and a condition "
-                          f"it ran (--condition)")
+        raise ConfigError(f"{path} is missing: {fix}")
     with np.load(path) as f:
-        states = {k: f[k] for k in f.files}
-    return load_table2_config(out / "config.yaml"), states
+        return {k: f[k] for k in f.files}
 
 
 def finished_condition_cli(description: str, argv=None):
@@ -328,11 +333,8 @@ def load_condition_agents(out: Path, cfg: "Table2Config", name: str, obs_size: i
 def _load_condition_models(out: Path, name: str, like) -> tuple[object, dict]:
     from mjx_protamer.experiments import checkpoints
 
-    path = out / f"test_states_{name}.npz"
-    if not path.is_file():
-        raise ConfigError(f"--resume: {path} is missing (a run of an older version?); start again with another --out")
-    with np.load(path) as f:
-        states = {k: f[k] for k in f.files}
+    states = _read_test_states(out, name, "--resume cannot use this run (an older version?); start again with "
+                                          "another --out")
     return checkpoints.restore(checkpoints.manager(out / "reward_models" / name), 0, like), states
 
 

@@ -61,6 +61,13 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     assert np.all(np.isfinite(jax.vmap(critic.apply)(params["critic"], obs, action)))
     with pytest.raises(ConfigError, match="agents/DTX is missing"):
         load_condition_agents(out, load_table2_config(out / "config.yaml"), "DTX", obs.shape[-1], action.shape[-1])
+    # the diagnostics in scripts/ read a finished condition's test states, and name what to fix when there are none
+    from mjx_protamer.experiments.table2 import finished_condition_cli
+
+    _, _, states = finished_condition_cli("diagnostic", [str(out), "--condition", "DTK"])
+    np.testing.assert_array_equal(states["obs"], obs)
+    with pytest.raises(SystemExit, match="test_states_DTX.npz is missing: give the --out directory"):
+        finished_condition_cli("diagnostic", [str(out), "--condition", "DTX"])
     # a run killed after two conditions: --resume keeps what finished and redoes the rest, to the same table
     kept = (out / "condition_DTK.json").read_bytes()
     for name in ("condition_DTW.json", "condition_DTP.json", "table2.json"):
