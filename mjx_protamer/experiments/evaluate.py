@@ -30,3 +30,8 @@ def evaluate(config, env, actor_params, episodes: int, seed: int) -> dict:
 def eval_seed(config) -> int:
     """Test episodes use their own seed stream, apart from training's."""
     return config.train.seed + 10_000
+
+
+def validation_seed(config) -> int:
+    """Validation episodes (choosing the test snapshot, agents/ddpg/selection.py) use a third stream."""
+    return config.train.seed + 20_000

@@ -4,6 +4,11 @@ The loop itself (progress bar, CSV/TensorBoard rows, checkpoints, resume) is `ex
 with `reproduce table2`. Everything random lives in the TrainState (and the feedback state), and a
 checkpoint holds all of it (learner, env batch, replay, RNG), so `resume=True` continues from the last
 checkpoint exactly as if the run had never stopped.
+
+With `train.select_every_chunks > 0` the test episodes run the snapshot that validated best
+(agents/ddpg/selection.py): the kept snapshot is a third checkpoint part (`checkpoints_selected/`), so a resumed
+run keeps it, every candidate's validation return goes to `selection.json`, and `run_loader.load_run` gives
+the kept actor for a finished run.
 """
 
 from __future__ import annotations
@@ -12,12 +17,13 @@ import json
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import yaml
 
 from mjx_protamer.config import ConfigError, read_raw, to_dict
 from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner
-from mjx_protamer.experiments.evaluate import eval_seed, evaluate
-from mjx_protamer.experiments.run_loader import CONFIG_NAME
+from mjx_protamer.experiments.evaluate import eval_seed, evaluate, validation_seed
+from mjx_protamer.experiments.run_loader import CONFIG_NAME, SELECTED_DIR
 
 
 def run_pretrain(
@@ -74,8 +80,9 @@ def run_pretrain(
     memory.check_fits(like, resolve_devices(tc.num_devices), like.replay, config.ddpg.replay_size,
                       other=None if fb_state is None else fb_state)
     out.mkdir(parents=True, exist_ok=True)
-    ckpt = runner.Checkpointer([ckpt_dir] + ([out / "checkpoints_feedback"] if fb is not None else []),
-                               tc.checkpoint_every_chunks)
+    select = tc.select_every_chunks > 0
+    ckpt = runner.Checkpointer([ckpt_dir] + ([out / "checkpoints_feedback"] if fb is not None else [])
+                               + ([out / SELECTED_DIR] if select else []), tc.checkpoint_every_chunks)
     checkpoints.write_atomic(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
     if fb is not None:
         checkpoints.write_atomic(out / "feedback_config.yaml", yaml.safe_dump(
@@ -83,6 +90,10 @@ def run_pretrain(
             sort_keys=False).encode())
     # The runner's state: one part per checkpoint directory.
     parts = (trainer.init(jax.random.PRNGKey(tc.seed)),) + ((fb_state,) if fb is not None else ())
+    if select:  # a copy: the chunk donates the TrainState's buffers
+        from mjx_protamer.agents.ddpg import selection
+
+        parts += (selection.init(jax.tree.map(jnp.copy, parts[0].actor_params)),)
     start = 0
     if resume:
         start, parts = ckpt.restore(parts)
@@ -106,6 +117,10 @@ def run_pretrain(
         def step(parts):
             ts, m = trainer.train_chunk(parts[0], human_params)
             return (ts,), m, None
+    candidates = []
+    if select:
+        step, candidates = _with_selection(step, config, env, fb, fb_params, human_reward_fn, human_params, out,
+                                           start)
     log = run_log.RunLog(out, resume_chunk=start)
     last_return = [float("nan")]  # the progress bar shows the latest finished episodes' return
 
@@ -125,6 +140,7 @@ def run_pretrain(
     state, chunk = run.state[0], run.chunks_done
     if fb is not None:
         fb_state = run.state[1]
+    kept = run.state[-1] if select else None
     log.close()
     if fb is not None:
         from mjx_protamer.experiments.feedback_train import reward_model_bytes
@@ -155,9 +171,17 @@ def run_pretrain(
                 "rm_updates_total", "r_hat_mean", "r_hat_std", "r_hat_score_corr") if k in last}
     if log.rows:
         result["plot"] = str(run_log.plot_curve(log.rows, out / run_log.PLOT_NAME))
+    if select:
+        result["selection"] = {"tested_chunk": int(kept.chunk), "score": float(kept.score),
+                               "candidates": candidates}
     if final_eval and result["finished"]:
-        summary = evaluate(config, env, state.actor_params, tc.eval_episodes, eval_seed(config))
-        (out / "eval.json").write_text(json.dumps(summary, indent=2))
+        summary = evaluate(config, env, state.actor_params if kept is None else kept.actor_params,
+                           tc.eval_episodes, eval_seed(config))
+        if select:  # the last actor on the same test episodes: what selection changed
+            last = evaluate(config, env, state.actor_params, tc.eval_episodes, eval_seed(config))
+            summary["selection"] = dict(result["selection"], last_actor={
+                k: last[k] for k in ("unique_regions", "freeze_ratio", "contact_rate", "episode_return")})
+        checkpoints.write_atomic(out / "eval.json", json.dumps(summary, indent=2).encode())
         result["eval"] = summary
         result["eval_json"] = str(out / "eval.json")
     ckpt.close()
@@ -171,6 +195,12 @@ def report(result: dict) -> str:
         ev = result["eval"]
         lines += [f"test episodes: {ev['episodes']} (deterministic actor), mean return {ev['episode_return']:.2f}",
                   metrics.format_table(ev, metrics.PAPER_DDPG), ""]
+    if "selection" in result.get("eval", {}):
+        sel = result["eval"]["selection"]
+        lines += [f"tested actor: the snapshot after chunk {sel['tested_chunk']} (best validation return "
+                  f"{sel['score']:.1f} of {len(sel['candidates'])} candidates, selection.json); the last actor on "
+                  f"the same episodes: freeze {sel['last_actor']['freeze_ratio']:.3f}, regions "
+                  f"{sel['last_actor']['unique_regions']:.1f}", ""]
     lines.append(f"trained {result['chunks_done']} chunks in {result['train_wall_s']:.1f} s"
                  f" ({result['steps_per_s']:.0f} env steps/s after compile)")
     if "feedback_summary" in result:
@@ -184,6 +214,44 @@ def report(result: dict) -> str:
         if result.get(key):
             lines.append(f"{key:<12} {result[key]}")
     return "\n".join(lines)
+
+
+def _with_selection(step, config, env, fb, fb_params, human_reward_fn, human_params, out: Path, start: int):
+    """`step` with the snapshot selection after it (the state's last part is the kept snapshot), and the list
+    of candidates so far (restored from `selection.json` on resume), which it keeps up to date there."""
+    from mjx_protamer.agents.ddpg import selection
+
+    tc, dc = config.train, config.ddpg
+    if fb is not None:
+        from mjx_protamer.experiments.feedback_train import human_reward
+
+        human_fn = human_reward(fb.apply)
+    else:
+        human_fn = human_reward_fn
+    validate = jax.jit(selection.make_validate(env, tc.episode_length, dc.actor_hidden, dc.reward_alpha,
+                                               dc.reward_beta, human_fn))
+    keep = jax.jit(selection.keep_better)
+    keys = jax.random.split(jax.random.PRNGKey(validation_seed(config)), tc.select_episodes)
+    path = out / "selection.json"
+    candidates = [c for c in json.loads(path.read_text())["candidates"] if c["chunk"] <= start] \
+        if start and path.is_file() else []
+    chunk = [start]
+
+    def selecting_step(parts):
+        new, metrics, extra = step(parts[:-1])
+        kept = parts[-1]
+        chunk[0] += 1
+        if selection.is_candidate(chunk[0], tc.num_chunks, tc.select_every_chunks, tc.select_from):
+            actor = new[0].actor_params
+            hp = {"params": new[1].rm_params, "gain": fb_params.gain} if fb is not None else human_params
+            score, speed = validate(actor, hp, keys)
+            kept = keep(kept, actor, score, chunk[0])
+            candidates.append({"chunk": chunk[0], "score": float(score),
+                               "freeze_ratio": float(jnp.mean(speed < config.env.freeze_speed))})
+            checkpoints.write_atomic(path, json.dumps({"candidates": candidates}, indent=2).encode())
+        return new + (kept,), metrics, extra
+
+    return selecting_step, candidates
 
 
 class FeedbackSetup:

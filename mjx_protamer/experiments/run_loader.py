@@ -12,6 +12,7 @@ from pathlib import Path
 from mjx_protamer.errors import CheckpointError
 
 CONFIG_NAME = "config.yaml"
+SELECTED_DIR = "checkpoints_selected"  # the snapshot the test episodes ran (train.select_every_chunks > 0)
 WHAT = "a pretrain run directory (made by `protamer pretrain --out DIR`), its checkpoints/ or a step in it"
 
 
@@ -48,7 +49,11 @@ def read_run_config(run_dir: Path):
 
 
 def load_run(path: str | Path):
-    """(config, env, train state, step) of a saved run; the state is restored onto one device."""
+    """(config, env, train state, step) of a saved run; the state is restored onto one device.
+
+    A finished run that selected its test snapshot (`train.select_every_chunks`) gives that snapshot as the
+    actor (and target actor), with the rest of the state from the last chunk: what its eval.json measured.
+    Any earlier step gives that step's own actor."""
     import jax
 
     from mjx_protamer.agents.ddpg.train import make_train
@@ -70,4 +75,21 @@ def load_run(path: str | Path):
         state = checkpoints.restore(mngr, step, like)
     finally:
         mngr.close()
+    if config.train.select_every_chunks > 0 and step == config.train.num_chunks:
+        state = _with_selected_actor(run_dir / SELECTED_DIR, step, state)
     return config, env, state, step
+
+
+def _with_selected_actor(path: Path, step: int, state):
+    from mjx_protamer.agents.ddpg import selection
+    from mjx_protamer.experiments import checkpoints
+
+    if step not in checkpoints.available_steps(path):
+        raise CheckpointError(f"{path} holds no step {step}: this run selected its test actor, and that "
+                              f"snapshot is missing; give an earlier step of {path.parent / 'checkpoints'}")
+    mngr = checkpoints.manager(path)
+    try:
+        kept = checkpoints.restore(mngr, step, selection.init(state.actor_params))
+    finally:
+        mngr.close()
+    return state.replace(actor_params=kept.actor_params, target_actor_params=kept.actor_params)

@@ -37,10 +37,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mjx_protamer.agents.ddpg import selection
 from mjx_protamer.agents.ddpg.config import PretrainConfig
+from mjx_protamer.agents.ddpg.selection import is_candidate
 from mjx_protamer.config import ConfigError, check, to_dict
 from mjx_protamer.experiments import metrics as M
-from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, make_feedback_train
+from mjx_protamer.experiments.evaluate import validation_seed
+from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, human_reward, make_feedback_train
 from mjx_protamer.experiments.run_log import flatten
 from mjx_protamer.experiments.runner import run_chunks
 from mjx_protamer.human.tamer_loop import FeedbackConfig
@@ -166,6 +169,13 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
     init = jax.jit(jax.vmap(ft.trainer.init))
     init_feedback = jax.jit(jax.vmap(ft.init))
     chunk_fn = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)), donate_argnums=(0, 1))
+    # The tested snapshot (train.select_every_chunks > 0): validation episodes of each seed's own stream
+    validate = jax.jit(jax.vmap(selection.make_validate(
+        env, tc.episode_length, pre.ddpg.actor_hidden, pre.ddpg.reward_alpha, pre.ddpg.reward_beta,
+        human_reward(ft.apply)), in_axes=(0, {"params": 0, "gain": None}, 0)))
+    keep = jax.jit(jax.vmap(selection.keep_better, in_axes=(0, 0, 0, None)))
+    val_keys = jnp.stack([jax.random.split(jax.random.PRNGKey(validation_seed(dataclasses.replace(
+        pre, train=dataclasses.replace(tc, seed=int(s))))), tc.select_episodes) for s in cfg.seeds])
     untrained = init_feedback(seeds).rm_params
     reward_models: dict[str, object] = {}
     test_states: dict[str, dict] = {}
@@ -185,9 +195,19 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
         fp = ft.params(kind, credit)
         fp = fp._replace(gain=fp.gain * cond.beta_scale)
 
+        chunks_run, validations = [0], []
+
         def step(state):  # called within this iteration: fp, cond and t0 are this condition's
-            ts, fs, m, _ = chunk_fn(*state, fp)
-            return (ts, fs), m, None
+            ts, fs, m, _ = chunk_fn(*state[:2], fp)
+            kept = state[2]
+            chunks_run[0] += 1
+            if is_candidate(chunks_run[0], tc.num_chunks, tc.select_every_chunks, tc.select_from):
+                score, speed = validate(ts.actor_params, {"params": fs.rm_params, "gain": fp.gain}, val_keys)
+                kept = keep(jax.vmap(selection.init)(ts.actor_params) if kept is None else kept, ts.actor_params, score,
+                            chunks_run[0])
+                validations.append({"chunk": chunks_run[0], "score": np.asarray(score).tolist(), "freeze_ratio":
+                                    np.mean(np.asarray(speed) < pre.env.freeze_speed, axis=(1, 2)).tolist()})
+            return (ts, fs, kept), m, None
 
         def progress_fn(info):
             rows = [{"condition": cond.name, "seed": int(seed), "chunk": info.chunk,
@@ -202,15 +222,25 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
                       f"{np.mean([r['r_hat_score_corr'] for r in rows]):+.2f} "
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
 
-        ts, fs = run_chunks(step, (init(keys), init_feedback(seeds)), tc.num_chunks,
-                            tc.chunk_steps * tc.num_envs * len(seeds), progress_fn=progress_fn).state
+        ts, fs, kept = run_chunks(step, (init(keys), init_feedback(seeds), None), tc.num_chunks,
+                                  tc.chunk_steps * tc.num_envs * len(seeds), progress_fn=progress_fn).state
         train_s = time.perf_counter() - t0
-        results, test_states[cond.name] = evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params, untrained)
+        tested = ts.actor_params if kept is None else kept.actor_params
+        results, test_states[cond.name] = evaluate_seeds(cfg, env, ft, tested, fs.rm_params, untrained)
+        # With selection, the last actor meets the same test episodes too: what selection changed is then a
+        # paired difference on one training run, not a comparison across runs
+        last_results = None if kept is None else evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params,
+                                                                untrained)[0]
         reward_models[cond.name] = fs.rm_params
         _save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name],
-                               {"actor": ts.actor_params, "critic": ts.critic_params})
+                               {"actor": tested, "critic": ts.critic_params})
+        kept_chunk = None if kept is None else np.asarray(kept.chunk)
         for i, seed in enumerate(cfg.seeds):
             ev = results[i]
+            if kept is not None:  # which snapshot was tested, and what each candidate validated at
+                ev["selection"] = {"tested_chunk": int(kept_chunk[i]), "candidates": [
+                    {"chunk": v["chunk"], "score": v["score"][i], "freeze_ratio": v["freeze_ratio"][i]}
+                    for v in validations], "last_actor": {k: last_results[i][k] for k in SELECTION_METRICS}}
             last = [r for r in training if r["condition"] == cond.name and r["seed"] == seed][-1]
             ev["feedback"] = {k: last[k] for k in ("feedback_total", "feedback_pos_total", "feedback_neg_total",
                                                    "credited_rows_total", "rm_updates_total", "r_hat_score_corr")}
@@ -246,6 +276,9 @@ def _corr(x: np.ndarray, y: np.ndarray) -> float | None:
     den = float(np.sqrt(np.sum(x * x) * np.sum(y * y)))
     return float(np.sum(x * y) / den) if den > 1e-12 else None
 
+
+# What `run_table2` also reports of the last actor when it tests a selected snapshot
+SELECTION_METRICS = ("unique_regions", "freeze_ratio", "contact_rate", "teacher_score")
 
 STATE_STRIDE = 5  # every 5th test step (25 ms) is kept for the pooled score: neighbours are near copies
 
@@ -463,6 +496,13 @@ def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> di
         entry["feedback"] = {k: float(np.mean([per_seed[s]["feedback"][k] for s in cfg.seeds]))
                              for k in per_seed[cfg.seeds[0]]["feedback"]}
         entry["train_wall_s"] = float(np.sum(wall[c.name]))
+        if "selection" in per_seed[cfg.seeds[0]]:
+            sel = [per_seed[s]["selection"] for s in cfg.seeds]
+            entry["selection"] = {
+                "tested_chunks": [x["tested_chunk"] for x in sel],
+                "last_actor": {k: seed_stats([x["last_actor"][k] for x in sel]) for k in SELECTION_METRICS},
+                "tested_minus_last": {k: seed_stats([per_seed[s][k] - x["last_actor"][k]
+                                                     for s, x in zip(cfg.seeds, sel)]) for k in SELECTION_METRICS}}
         conds[c.name] = entry
     tc = cfg.pretrain.train
     baseline = next((c.name for c in cfg.conditions if c.channel == "none"), None)
@@ -548,6 +588,17 @@ def format_markdown(summary: dict) -> str:
             seeds = ", ".join("n/a" if d is None else f"{d:.2f}" for d in v["paired"]["seed_values"])
             lines.append(f"| {c} | {v['difference']:.3f} | {v['ci95_sum']:.3f} | "
                          f"{'yes' if v['beyond_ci95_sum'] else 'no'} | {_fmt(v['paired'])} ({seeds}) |")
+    selected = [c for c in names if "selection" in conds[c]]
+    if selected:
+        lines += ["", "The tested actor is the best snapshot on validation episodes (train.select_every_chunks); the "
+                      "last actor on the same test episodes:", "",
+                  "| Condition | tested chunk per seed | " + " | ".join(f"{k}: last actor | tested - last (paired)"
+                                                                      for k in SELECTION_METRICS) + " |",
+                  "|---|---|" + "---|---|" * len(SELECTION_METRICS)]
+        for c in selected:
+            sel = conds[c]["selection"]
+            lines.append(f"| {c} | {', '.join(str(k) for k in sel['tested_chunks'])} | " + " | ".join(
+                f"{_fmt(sel['last_actor'][k])} | {_fmt(sel['tested_minus_last'][k])}" for k in SELECTION_METRICS) + " |")
     lines += ["", "Per-seed means (seeds in order):", ""]
     for metric in M.METRIC_NAMES + ("teacher_score", "r_hat_corr_test", "r_hat_corr_pooled"):
         vals = "; ".join(f"{c} " + ", ".join("n/a" if v is None else f"{v:.3g}" for v in conds[c][metric]["seed_values"])

@@ -106,6 +106,12 @@ class TrainConfig:
     checkpoint_every_chunks: int = 5
     num_devices: int = 0  # data-parallel devices to shard over; 0 = all of jax.devices()
     eval_episodes: int = 10
+    # The test policy: 0, the last actor (the paper); N > 0, the best of the actors after every N-th chunk
+    # from `select_from` of the run (and the last), by the learner's objective on `select_episodes`
+    # validation episodes (agents/ddpg/selection.py says why)
+    select_every_chunks: int = 0
+    select_from: float = 0.5
+    select_episodes: int = 4
 
     def validate(self) -> None:
         check(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
@@ -120,6 +126,11 @@ class TrainConfig:
               f"must be >= 1, got {self.checkpoint_every_chunks}")
         check(self.num_devices >= 0, "num_devices", f"must be >= 0, got {self.num_devices}")
         check(self.eval_episodes >= 1, "eval_episodes", f"must be >= 1, got {self.eval_episodes}")
+        check(self.select_every_chunks >= 0, "select_every_chunks",
+              f"must be >= 0 (0 tests the last actor), got {self.select_every_chunks}")
+        check(0.0 <= self.select_from < 1.0, "select_from",
+              f"must be in [0, 1) (the share of the run before snapshots are validated), got {self.select_from}")
+        check(self.select_episodes >= 1, "select_episodes", f"must be >= 1, got {self.select_episodes}")
 
     @property
     def iterations(self) -> int:
