@@ -81,3 +81,19 @@ def test_overrides_without_a_file_change_only_what_they_name():
     assert cfg.pretrain == dataclasses.replace(
         base.pretrain, train=dataclasses.replace(base.pretrain.train, total_env_steps=32000))
     assert cfg.seeds == tuple(range(10)) and cfg.batched == base.batched and cfg.conditions == base.conditions
+
+
+def test_table2_tour_is_the_default_with_the_tour_rule_selection_and_ten_seeds_only():
+    """configs/table2_tour.yaml changes the built-in default's rule, conditions, seeds and test snapshot and
+    nothing else, so its DDPG is the default's baseline."""
+    import dataclasses
+
+    base, tour = load_table2_config(CONFIGS / "table2_attention.yaml"), load_table2_config(CONFIGS / "table2_tour.yaml")
+    assert [(c.signal, c.value, c.sustain) for c in tour.feedback.teacher.rule] == [
+        ("habituation", 1.0, 20), ("obs_norm:64:68,70:74", -1.0, 100)]
+    assert tour.feedback == dataclasses.replace(base.feedback, teacher=dataclasses.replace(
+        base.feedback.teacher, rule=tour.feedback.teacher.rule))
+    assert tour.pretrain == dataclasses.replace(base.pretrain, train=dataclasses.replace(
+        base.pretrain.train, select_every_chunks=8, select_from=0.5, select_episodes=4))
+    assert [c.name for c in tour.conditions] == ["DDPG", "DTK"] and tour.conditions == base.conditions[:2]
+    assert tour.seeds == tuple(range(10)) and tour.batched == base.batched
