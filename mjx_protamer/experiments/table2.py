@@ -39,7 +39,6 @@ import numpy as np
 
 from mjx_protamer.agents.ddpg import selection
 from mjx_protamer.agents.ddpg.config import PretrainConfig
-from mjx_protamer.agents.ddpg.selection import is_candidate
 from mjx_protamer.config import ConfigError, check, to_dict
 from mjx_protamer.experiments import metrics as M
 from mjx_protamer.experiments.evaluate import validation_seed
@@ -201,7 +200,7 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
             ts, fs, m, _ = chunk_fn(*state[:2], fp)
             kept = state[2]
             chunks_run[0] += 1
-            if is_candidate(chunks_run[0], tc.num_chunks, tc.select_every_chunks, tc.select_from):
+            if selection.is_candidate(chunks_run[0], tc.num_chunks, tc.select_every_chunks, tc.select_from):
                 score, speed = validate(ts.actor_params, {"params": fs.rm_params, "gain": fp.gain}, val_keys)
                 kept = keep(jax.vmap(selection.init)(ts.actor_params) if kept is None else kept, ts.actor_params, score,
                             chunks_run[0])
