@@ -97,3 +97,19 @@ def test_table2_tour_is_the_default_with_the_tour_rule_selection_and_ten_seeds_o
         base.pretrain.train, select_every_chunks=8, select_from=0.5, select_episodes=4))
     assert [c.name for c in tour.conditions] == ["DDPG", "DTK"] and tour.conditions == base.conditions[:2]
     assert tour.seeds == tuple(range(10)) and tour.batched == base.batched
+
+
+def test_table2_tour_right_is_the_tour_config_with_a_left_hand_reproach_only():
+    """configs/table2_tour_right.yaml adds one clause (the left hand touching, -1) to configs/table2_tour.yaml's
+    rule and changes nothing else, so its DDPG trains exactly as the tour config's."""
+    import dataclasses
+
+    tour = load_table2_config(CONFIGS / "table2_tour.yaml")
+    right = load_table2_config(CONFIGS / "table2_tour_right.yaml")
+    assert [(c.signal, c.value, c.above, c.below, c.sustain) for c in right.feedback.teacher.rule] == [
+        ("habituation", 1.0, 0.5, None, 20), ("obs_norm:0:26", -1.0, 0.05, None, 20),
+        ("obs_norm:64:68,70:74", -1.0, None, 1.0, 100)]
+    assert right.feedback == dataclasses.replace(tour.feedback, teacher=dataclasses.replace(
+        tour.feedback.teacher, rule=right.feedback.teacher.rule))
+    assert (right.pretrain, right.batched, right.conditions, right.seeds) == (
+        tour.pretrain, tour.batched, tour.conditions, tour.seeds)
