@@ -5,7 +5,7 @@ Two steps, both on the production code paths:
   collect: train one seed of a table2 condition (DTK by default) exactly as `protamer reproduce table2` does,
            and record every chunk's steps (obs, action) and the teacher's output (value, valid, score, about)
            through debug callbacks on `feedback_train`'s `rule_signals` and `batched_teacher`; then the test
-           episodes' states with their hidden score (`table2.evaluate_seeds`).
+           episodes' states with their hidden score (`table2.make_seed_evaluator`).
            .venv/bin/python scripts/diagnose_reward_labels.py collect --config configs/table2_habituation.yaml \
                --seed 0 --out runs/labels_seed0.npz
   fit:     fit fresh reward models offline on the recorded run's credited and silent rows
@@ -86,7 +86,7 @@ def collect(args) -> None:
                   f"({time.perf_counter() - t0:.0f} s)", flush=True)
     jax.effects_barrier()
     one = lambda t: jax.tree.map(lambda x: x[None], t)
-    res, sample = T2.evaluate_seeds(cfg, env, ft, one(ts.actor_params), one(fs.rm_params), one(untrained))
+    res, sample = T2.make_seed_evaluator(cfg, env, ft)(one(ts.actor_params), one(fs.rm_params), one(untrained))
     print(json.dumps({k: res[0][k] for k in ("unique_regions", "freeze_ratio", "teacher_score", "r_hat_corr_test")}))
     np.savez_compressed(args.out, **{k: np.stack(v[:n]) for k, v in rec.items()},  # the test rollout's come after
                         **{"test_" + k: np.asarray(v[0]) for k, v in sample.items()},

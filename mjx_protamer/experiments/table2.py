@@ -176,6 +176,7 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
     val_keys = jnp.stack([jax.random.split(jax.random.PRNGKey(validation_seed(dataclasses.replace(
         pre, train=dataclasses.replace(tc, seed=int(s))))), tc.select_episodes) for s in cfg.seeds])
     untrained = init_feedback(seeds).rm_params
+    evaluate_seeds = make_seed_evaluator(cfg, env, ft)  # traced once for every condition and actor
     reward_models: dict[str, object] = {}
     test_states: dict[str, dict] = {}
     for cond in cfg.conditions:
@@ -225,11 +226,10 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
                                   tc.chunk_steps * tc.num_envs * len(seeds), progress_fn=progress_fn).state
         train_s = time.perf_counter() - t0
         tested = ts.actor_params if kept is None else kept.actor_params
-        results, test_states[cond.name] = evaluate_seeds(cfg, env, ft, tested, fs.rm_params, untrained)
+        results, test_states[cond.name] = evaluate_seeds(tested, fs.rm_params, untrained)
         # With selection, the last actor meets the same test episodes too: what selection changed is then a
         # paired difference on one training run, not a comparison across runs
-        last_results = None if kept is None else evaluate_seeds(cfg, env, ft, ts.actor_params, fs.rm_params,
-                                                                untrained)[0]
+        last_results = None if kept is None else evaluate_seeds(ts.actor_params, fs.rm_params, untrained)[0]
         reward_models[cond.name] = fs.rm_params
         _save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name],
                                {"actor": tested, "critic": ts.critic_params})
@@ -388,12 +388,15 @@ def pooled_corr(ft, reward_models: dict, untrained_params, test_states: dict) ->
     return out
 
 
-def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untrained_params) -> tuple[list[dict], dict]:
-    """Test episodes of every seed's deterministic actor (vmapped over seeds): the four metrics, the
-    teacher's mean hidden score on them (`teacher_score`), and how r_hat tracks that score on these
-    held-out states, beside an untrained reward model of the same seed (`r_hat_corr_test`,
-    `r_hat_corr_untrained`). Also every STATE_STRIDE-th test state with its score, per seed (seeds, n, ...),
-    for `pooled_corr`."""
+def make_seed_evaluator(cfg: Table2Config, env, ft):
+    """`evaluate(actor_params, rm_params, untrained_params) -> (per-seed results, sample)`: test episodes of
+    every seed's deterministic actor (vmapped over seeds): the four metrics, the teacher's mean hidden score
+    on them (`teacher_score`), and how r_hat tracks that score on these held-out states, beside an untrained
+    reward model of the same seed (`r_hat_corr_test`, `r_hat_corr_untrained`). Also every STATE_STRIDE-th
+    test state with its score, per seed (seeds, n, ...), for `pooled_corr`.
+
+    One evaluator serves a whole run: its jitted rollout is traced once, then every condition's tested and
+    last actors reuse it (the parameter shapes are the same)."""
     from mjx_protamer.agents.ddpg.evaluate import make_rollout
     from mjx_protamer.experiments.evaluate import eval_seed
     from mjx_protamer.human.teachers import rule_scores
@@ -405,7 +408,6 @@ def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untraine
         pre, train=dataclasses.replace(pre.train, seed=int(s))))), episodes) for s in cfg.seeds])
     teacher = cfg.feedback.teacher
 
-    @jax.jit
     def run(actor_params, rm_params, untrained_params, keys):
         sig = rollout(actor_params, keys)
         score = jax.vmap(lambda o, a, t, r: rule_scores(teacher, ft.signals(o, a, t, r)))(
@@ -418,21 +420,26 @@ def evaluate_seeds(cfg: Table2Config, env, ft, actor_params, rm_params, untraine
         sample = jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), sample)  # (episodes * steps, ...)
         return {k: sig[k] for k in keep}, score, r_hat, r_hat0, sample
 
-    sig, score, r_hat, r_hat0, sample = jax.device_get(
-        jax.vmap(run)(actor_params, rm_params, untrained_params, keys))
-    out = []
-    for i in range(len(cfg.seeds)):
-        ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i],
-                         freeze_threshold=pre.env.freeze_speed)
-        returns = np.sum(sig["reward"][i], axis=1)
-        ev["episode_return"] = float(returns.mean())
-        ev["per_episode"]["episode_return"] = [float(r) for r in returns]
-        ev["teacher_score"] = float(score[i].mean())
-        ev["per_episode"]["teacher_score"] = [float(x) for x in score[i].mean(axis=1)]
-        ev["r_hat_corr_test"] = _corr(np.ravel(r_hat[i]), np.ravel(score[i]))
-        ev["r_hat_corr_untrained"] = _corr(np.ravel(r_hat0[i]), np.ravel(score[i]))
-        out.append(ev)
-    return out, sample
+    run_seeds = jax.jit(jax.vmap(run))
+
+    def evaluate(actor_params, rm_params, untrained_params) -> tuple[list[dict], dict]:
+        sig, score, r_hat, r_hat0, sample = jax.device_get(run_seeds(actor_params, rm_params, untrained_params,
+                                                                     keys))
+        out = []
+        for i in range(len(cfg.seeds)):
+            ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i],
+                             freeze_threshold=pre.env.freeze_speed)
+            returns = np.sum(sig["reward"][i], axis=1)
+            ev["episode_return"] = float(returns.mean())
+            ev["per_episode"]["episode_return"] = [float(r) for r in returns]
+            ev["teacher_score"] = float(score[i].mean())
+            ev["per_episode"]["teacher_score"] = [float(x) for x in score[i].mean(axis=1)]
+            ev["r_hat_corr_test"] = _corr(np.ravel(r_hat[i]), np.ravel(score[i]))
+            ev["r_hat_corr_untrained"] = _corr(np.ravel(r_hat0[i]), np.ravel(score[i]))
+            out.append(ev)
+        return out, sample
+
+    return evaluate
 
 
 def seed_stats(values) -> dict:
