@@ -1,4 +1,5 @@
-"""`protamer reproduce table2`: the paper's Table II and Figures 1-2 with simulated teachers."""
+"""`protamer reproduce table2`: the paper's Table II and Figures 1-2 with simulated teachers; `reproduce rescore`:
+the agents of a finished table2 run scored again under another teacher rule."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ def register(subparsers) -> None:
     )
     t.add_argument("--config", type=Path, default=None,
                    help="YAML (default: the built-in default, equal to configs/table2_attention.yaml: "
-                   "habituation, the right-hand rule, asinh reward-model inputs; configs/table2.yaml is the "
+                   "habituation, the lateral rule (right hand +1, left -1), asinh reward-model inputs; configs/table2.yaml is the "
                    "earlier head rule without habituation, configs/table2_paper.yaml the paper's single-env "
                    "20-episode setting)")
     t.add_argument("--seeds", type=int, default=None, help="run seeds 0..N-1 (default: the config's seeds)")
@@ -41,6 +42,23 @@ def register(subparsers) -> None:
                    help="continue the run in --out: conditions already finished there are kept, not retrained")
     t.add_argument("--quiet", action="store_true", help="no per-chunk progress lines")
     t.set_defaults(handler=_table2)
+    r = sub.add_parser(
+        "rescore",
+        help="test a finished table2 run's agents again and score them under another teacher rule",
+        description="Runs the test episodes of every finished condition of a table2 run again (its saved agents, "
+        "its test seeds) and scores them with the hidden score of another rule, without training: Table II "
+        "of the same policies in the eyes of another teacher, with the teacher-score contrasts against the "
+        "baseline. Writes table2.json/.md in --out.",
+    )
+    r.add_argument("run", type=Path, help="the --out directory of a finished `protamer reproduce table2` run")
+    r.add_argument("--config", type=Path, default=None,
+                   help="a table2 YAML whose feedback.teacher.rule scores the agents (default: the built-in "
+                   "default's lateral rule), e.g. configs/table2_tour_right.yaml")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a value of --config, e.g. --set 'feedback.teacher.rule=[...]' (repeatable)")
+    r.add_argument("--out", type=Path, default=None, help="output directory (default: RUN/rescore-<time>)")
+    r.add_argument("--quiet", action="store_true", help="no per-condition progress lines")
+    r.set_defaults(handler=_rescore)
 
 
 def _table2(args: argparse.Namespace) -> int:
@@ -62,4 +80,17 @@ def _table2(args: argparse.Namespace) -> int:
     for key in ("table_md", "table_json", "figure1", "figure2", "training_csv"):
         print(f"{key:<13} {result[key]}")
     print(f"wall time     {result['wall_s']:.0f} s")
+    return 0
+
+
+def _rescore(args: argparse.Namespace) -> int:
+    from mjx_protamer.commands.train import _enable_compile_cache
+    from mjx_protamer.experiments.rescore import rescore_table2
+
+    _enable_compile_cache()
+    with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
+        result = rescore_table2(args.run, args.config, args.out, args.overrides, progress=not args.quiet)
+    print(Path(result["table_md"]).read_text())
+    for key in ("table_md", "table_json"):
+        print(f"{key:<13} {result[key]}")
     return 0

@@ -68,6 +68,36 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     np.testing.assert_array_equal(states["obs"], obs)
     with pytest.raises(SystemExit, match="test_states_DTX.npz is missing: give the --out directory"):
         finished_condition_cli("diagnostic", [str(out), "--condition", "DTX"])
+    # the saved agents scored again without training: the same test episodes (the run's behaviour metrics); the
+    # run's own rule gives its teacher scores, the rule with every clause's value negated their negation
+    assert main(["reproduce", "rescore", str(out), "--config", str(cfg), "--out", str(tmp_path / "same"),
+                 "--quiet"]) == 0
+    same = json.loads((tmp_path / "same" / "table2.json").read_text())
+    flipped_cfg = tmp_path / "flipped.yaml"
+    flipped_rule = [{**clause, "value": -clause["value"]} for clause in CONFIG["feedback"]["teacher"]["rule"]]
+    flipped_cfg.write_text(yaml.safe_dump({**CONFIG, "feedback": {**CONFIG["feedback"], "teacher": {
+        **CONFIG["feedback"]["teacher"], "rule": flipped_rule}}}))
+    assert main(["reproduce", "rescore", str(out), "--config", str(flipped_cfg), "--out", str(tmp_path / "flip"),
+                 "--quiet"]) == 0
+    flip = json.loads((tmp_path / "flip" / "table2.json").read_text())
+    assert flip["rescored"]["run"] == str(out) and flip["rescored"]["rule"][0]["value"] == -1.0
+    for n in c:
+        for rescored in (same, flip):
+            r = rescored["conditions"][n]
+            assert r["unique_regions"]["per_episode"] == c[n]["unique_regions"]["per_episode"], n
+            assert r["freeze_ratio"]["seed_values"] == pytest.approx(c[n]["freeze_ratio"]["seed_values"]), n
+        assert same["conditions"][n]["teacher_score"]["seed_values"] == pytest.approx(
+            c[n]["teacher_score"]["seed_values"], abs=1e-6), n
+        assert flip["conditions"][n]["teacher_score"]["seed_values"] == pytest.approx(
+            [-v for v in c[n]["teacher_score"]["seed_values"]], abs=1e-6), n
+    assert flip["teacher_score_vs_baseline"]["conditions"]["DTK"]["paired"]["seed_values"] == pytest.approx(
+        [-v for v in dtk["paired"]["seed_values"]], abs=1e-6)
+    capsys.readouterr()
+    assert main(["reproduce", "rescore", str(out), "--set",
+                 "feedback.teacher.rule=[{signal: no_such_signal, value: 1.0, above: 0.5}]", "--quiet"]) == 2
+    assert "no_such_signal" in capsys.readouterr().err
+    assert main(["reproduce", "rescore", str(tmp_path / "nothing"), "--quiet"]) == 2
+    assert "is missing: give the --out directory of a table2 run" in capsys.readouterr().err
     # a run killed after two conditions: --resume keeps what finished and redoes the rest, to the same table
     kept = (out / "condition_DTK.json").read_bytes()
     for name in ("condition_DTW.json", "condition_DTP.json", "table2.json"):
