@@ -1,0 +1,123 @@
+"""Conditions of several table2 runs side by side: pooled by name over seeds, paired against a reference.
+
+An ablation often runs as several programs: a condition's seeds 0-9 in one run and 10-19 in another, or a
+variant (a channel with another delay, `--set feedback.teacher.channel...`) in its own run beside the run it
+varies. This pools every condition by name over the runs' `table2.json` (`seed_values` with the run's `seeds`;
+a seed given twice for one name is an error) and prints JSON: per condition and metric the mean, the 95%
+half-width and the per-seed values (`table2.seed_stats`), and with `--reference NAME` each condition's
+difference to it, unpaired and paired over the seeds both ran (`table2.contrast`). `--plot PNG` draws each
+metric's per-seed values, the mean and its 95% interval, one panel a metric.
+
+    .venv/bin/python scripts/compare_conditions.py RUN... [--names DTK,DTW,...] [--reference DTK]
+        [--metric teacher_score --metric r_hat_corr_test] [--plot compare.png]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from mjx_protamer.experiments.table2 import contrast, seed_stats
+
+DEFAULT_METRICS = ("teacher_score", "r_hat_corr_test", "unique_regions", "freeze_ratio")
+
+
+def pool(runs: list[Path], metrics) -> dict[str, dict[str, dict[int, float]]]:
+    """{condition: {metric: {seed: value}}} over the runs; a seed twice for one condition raises ValueError."""
+    pooled: dict[str, dict[str, dict[int, float]]] = {}
+    for run in runs:
+        path = run if run.suffix == ".json" else run / "table2.json"
+        if not path.is_file():
+            raise ValueError(f"{path} is missing: give the --out directory of a finished table2 run")
+        summary = json.loads(path.read_text())
+        for name, cond in summary["conditions"].items():
+            for m in metrics:
+                if m not in cond:
+                    continue
+                per_seed = pooled.setdefault(name, {}).setdefault(m, {})
+                for seed, v in zip(summary["seeds"], cond[m]["seed_values"]):
+                    if seed in per_seed:
+                        raise ValueError(f"condition {name} has seed {seed} in two runs (the second: {run}); "
+                                         f"give each seed of a condition once")
+                    per_seed[seed] = v
+    return pooled
+
+
+def compare(pooled: dict, names: list[str], metrics, reference: str | None) -> dict:
+    out: dict = {"conditions": {}, "reference": reference}
+    for name in names:
+        entry = {}
+        for m in metrics:
+            sv = pooled[name].get(m, {})
+            seeds = sorted(sv)
+            entry[m] = {"seeds": seeds, **seed_stats([sv[s] for s in seeds])}
+            if reference is not None and name != reference and m in pooled[reference]:
+                ref = pooled[reference][m]
+                common = [s for s in seeds if s in ref]
+                entry[m]["vs_reference"] = {"seeds": common, **contrast([ref[s] for s in common],
+                                                                        [sv[s] for s in common])}
+        out["conditions"][name] = entry
+    return out
+
+
+def plot(result: dict, metrics, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(result["conditions"])
+    fig, axes = plt.subplots(1, len(metrics), figsize=(1.2 + 0.75 * len(names) * len(metrics), 4.2), squeeze=False)
+    for ax, m in zip(axes[0], metrics):
+        for i, n in enumerate(names):
+            st = result["conditions"][n][m]
+            v = np.asarray([np.nan if x is None else x for x in st["seed_values"]], float)
+            jitter = np.linspace(-0.18, 0.18, len(v)) if len(v) > 1 else np.zeros(len(v))
+            ax.scatter(i + jitter, v, marker="o", facecolors="none", edgecolors="grey", s=18, zorder=2,
+                       label="seeds" if i == 0 else None)
+            if st["mean"] is not None:
+                ax.errorbar(i, st["mean"], yerr=st["ci95"] or 0.0, fmt="s", color="black", capsize=4, zorder=3,
+                            label="mean ± 95% CI" if i == 0 else None)
+        ax.set_xticks(range(len(names)), names, rotation=35, ha="right", fontsize=8)
+        ax.set_title(m, fontsize=9)
+        ax.grid(alpha=0.3, axis="y")
+    axes[0][0].legend(fontsize=7, loc="best")
+    n_seeds = sorted({len(result["conditions"][n][metrics[0]]["seed_values"]) for n in names})
+    fig.suptitle(f"per-seed values, seeds per condition: {', '.join(map(str, n_seeds))}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", type=Path, nargs="+", help="--out directories of finished table2 runs")
+    ap.add_argument("--names", default=None, help="conditions to show, comma-separated, in this order (default: all)")
+    ap.add_argument("--reference", default=None, help="the condition the others are paired against")
+    ap.add_argument("--metric", action="append", default=None, help=f"repeatable (default: {', '.join(DEFAULT_METRICS)})")
+    ap.add_argument("--plot", type=Path, default=None, help="write a PNG of the per-seed values")
+    args = ap.parse_args(argv)
+    metrics = tuple(args.metric or DEFAULT_METRICS)
+    try:
+        pooled = pool(args.runs, metrics)
+        names = args.names.split(",") if args.names else list(pooled)
+        for n in names + ([args.reference] if args.reference else []):
+            if n not in pooled:
+                raise ValueError(f"no run has a condition named {n!r}; they have: {', '.join(pooled)}")
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    result = compare(pooled, names, metrics, args.reference)
+    if args.plot:
+        result["plot"] = str(plot(result, metrics, args.plot))
+    print(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
