@@ -8,7 +8,7 @@ half-width and the per-seed values (`table2.seed_stats`), and with `--reference 
 difference to it, unpaired and paired over the seeds both ran (`table2.contrast`). `--plot PNG` draws each
 metric's per-seed values, the mean and its 95% interval, one panel a metric.
 
-    .venv/bin/python scripts/compare_conditions.py RUN... [--names DTK,DTW,...] [--reference DTK]
+    .venv/bin/python scripts/compare_conditions.py RUN[@TAG]... [--names DTK,DTW,...] [--reference DTK]
         [--metric teacher_score --metric r_hat_corr_test] [--plot compare.png]
 """
 
@@ -26,15 +26,19 @@ from mjx_protamer.experiments.table2 import contrast, seed_stats
 DEFAULT_METRICS = ("teacher_score", "r_hat_corr_test", "unique_regions", "freeze_ratio")
 
 
-def pool(runs: list[Path], metrics) -> dict[str, dict[str, dict[int, float]]]:
-    """{condition: {metric: {seed: value}}} over the runs; a seed twice for one condition raises ValueError."""
+def pool(runs: list[str], metrics) -> dict[str, dict[str, dict[int, float]]]:
+    """{condition: {metric: {seed: value}}} over the runs; a seed twice for one condition raises ValueError.
+    A run given as DIR@TAG names its conditions NAME@TAG (the same condition trained or scored two ways)."""
     pooled: dict[str, dict[str, dict[int, float]]] = {}
-    for run in runs:
+    for arg in runs:
+        run, _, tag = str(arg).partition("@")
+        run = Path(run)
         path = run if run.suffix == ".json" else run / "table2.json"
         if not path.is_file():
             raise ValueError(f"{path} is missing: give the --out directory of a finished table2 run")
         summary = json.loads(path.read_text())
         for name, cond in summary["conditions"].items():
+            name = f"{name}@{tag}" if tag else name
             for m in metrics:
                 if m not in cond:
                     continue
@@ -96,7 +100,8 @@ def plot(result: dict, metrics, path: Path) -> Path:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("runs", type=Path, nargs="+", help="--out directories of finished table2 runs")
+    ap.add_argument("runs", nargs="+", help="--out directories of finished table2 runs (or rescores); DIR@TAG "
+                    "names that run's conditions NAME@TAG")
     ap.add_argument("--names", default=None, help="conditions to show, comma-separated, in this order (default: all)")
     ap.add_argument("--reference", default=None, help="the condition the others are paired against")
     ap.add_argument("--metric", action="append", default=None, help=f"repeatable (default: {', '.join(DEFAULT_METRICS)})")

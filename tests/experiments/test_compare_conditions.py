@@ -42,6 +42,10 @@ def test_a_seed_twice_and_an_unknown_name_are_one_line_errors(tmp_path, capsys):
     b = write_run(tmp_path / "b", [1, 2], {"REF": [0.3, 0.4]})
     assert compare_conditions.main([str(a), str(b)]) == 2
     assert "condition REF has seed 1 in two runs" in capsys.readouterr().err
+    c = write_run(tmp_path / "c", [0, 1], {"REF": [0.2, 0.4]})
+    assert compare_conditions.main([str(a), f"{c}@again", "--reference", "REF"]) == 0  # tagged: REF@again
+    tagged = json.loads(capsys.readouterr().out)["conditions"]["REF@again"]["teacher_score"]["vs_reference"]
+    assert tagged["seeds"] == [0, 1] and tagged["paired"]["seed_values"] == pytest.approx([0.2, 0.3])
     assert compare_conditions.main([str(a), "--names", "REF,NOPE"]) == 2
     assert "no run has a condition named 'NOPE'" in capsys.readouterr().err
     assert compare_conditions.main([str(tmp_path / "missing")]) == 2
