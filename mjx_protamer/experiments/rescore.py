@@ -61,8 +61,8 @@ def rescore_table2(run, rule_config=None, out=None, overrides=None, progress: bo
 
     t0 = time.perf_counter()
     pre = cfg.pretrain
-    env = make_env(pre)  # raises for a rule signal this env lacks (below, when the columns are looked up)
-    ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)
+    env = make_env(pre)
+    ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)  # a rule signal this env lacks: ConfigError
     untrained = jax.jit(jax.vmap(ft.init))(np.asarray(cfg.seeds, np.int32)).rm_params
     evaluate = make_seed_evaluator(cfg, env, ft)
     evals, wall, reward_models, samples = {}, {}, {}, {}
