@@ -28,7 +28,7 @@ from mjx_protamer.config import ConfigError, to_dict
 from mjx_protamer.experiments.checkpoints import write_atomic
 from mjx_protamer.experiments.env_factory import make_env
 from mjx_protamer.experiments.feedback_train import make_feedback_train
-from mjx_protamer.experiments.table2 import (_load_condition_models, _summarize, format_markdown, load_condition_agents,
+from mjx_protamer.experiments.table2 import (load_condition_models, summarize, format_markdown, load_condition_agents,
                                              load_table2_config, make_seed_evaluator, pooled_corr)
 
 
@@ -69,7 +69,7 @@ def rescore_table2(run, rule_config=None, out=None, overrides=None, progress: bo
     for name in names:
         kept = json.loads((run / f"condition_{name}.json").read_text())
         _, _, agents = load_condition_agents(run, cfg, name, env.observation_size, env.action_size)
-        reward_models[name], _ = _load_condition_models(run, name, untrained)
+        reward_models[name], _ = load_condition_models(run, name, untrained)
         results, samples[name] = evaluate(agents["actor"], reward_models[name], untrained)
         evals[name] = {}
         for seed, ev in zip(cfg.seeds, results):
@@ -82,7 +82,7 @@ def rescore_table2(run, rule_config=None, out=None, overrides=None, progress: bo
     for name, per_seed in pooled_corr(ft, reward_models, untrained, samples).items():
         for seed, extra in zip(cfg.seeds, per_seed):
             evals[name][seed].update(extra)
-    summary = _summarize(cfg, evals, wall, time.perf_counter() - t0)
+    summary = summarize(cfg, evals, wall, time.perf_counter() - t0)
     summary["rescored"] = {"run": str(run), "rule_from": str(rule_config) if rule_config else "built-in default",
                            "rule": [dataclasses.asdict(c) for c in rule],
                            "note": "the run's agents tested again; teacher_score and r_hat_corr_* under this rule, "

@@ -181,7 +181,7 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
     test_states: dict[str, dict] = {}
     for cond in cfg.conditions:
         if done[cond.name].is_file():  # finished before an interruption (resume)
-            reward_models[cond.name], test_states[cond.name] = _load_condition_models(out, cond.name, untrained)
+            reward_models[cond.name], test_states[cond.name] = load_condition_models(out, cond.name, untrained)
             kept = json.loads(done[cond.name].read_text())
             training += kept["training"]
             evals[cond.name] = {int(k): v for k, v in kept["evals"].items()}
@@ -257,7 +257,7 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
             write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(evals[name][seed], indent=2))
     total_s = time.perf_counter() - t_all
     _write_training_csv(training, out / "training.csv")
-    summary = _summarize(cfg, evals, wall, total_s)
+    summary = summarize(cfg, evals, wall, total_s)
     write_atomic(out / "table2.json", json.dumps(summary, indent=2))
     write_atomic(out / "table2.md", format_markdown(summary))
     fig1 = plot_training(training, cfg, out / "figure1_training_reward.png")
@@ -362,7 +362,9 @@ def load_condition_agents(out: Path, cfg: "Table2Config", name: str, obs_size: i
     return actor, critic, checkpoints.restore(checkpoints.manager(path), 0, like)
 
 
-def _load_condition_models(out: Path, name: str, like) -> tuple[object, dict]:
+def load_condition_models(out: Path, name: str, like) -> tuple[object, dict]:
+    """(reward-model params stacked over seeds, sampled test states) of a finished condition (`like`: params of
+    the same shape, e.g. untrained ones)."""
     from mjx_protamer.experiments import checkpoints
 
     states = _read_test_states(out, name, "--resume cannot use this run (an older version?); start again with "
@@ -485,7 +487,9 @@ def _write_training_csv(rows: list[dict], path: Path) -> None:
         w.writerows(rows)
 
 
-def _summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> dict:
+def summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> dict:
+    """table2.json's content: per condition and metric the seed statistics, the contrasts against the baseline,
+    and the run's setting (`evals[name][seed]`: one seed's test results; `wall[name]`: training seconds)."""
     conds = {}
     for c in cfg.conditions:
         per_seed = evals[c.name]
