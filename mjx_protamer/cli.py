@@ -19,6 +19,7 @@ COMMAND_MODULES = (
     "mjx_protamer.commands.voice",
     "mjx_protamer.commands.train",
     "mjx_protamer.commands.feedback",
+    "mjx_protamer.commands.reaction_delay",
     "mjx_protamer.commands.reproduce",
     "mjx_protamer.commands.render",
 )

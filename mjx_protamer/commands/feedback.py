@@ -450,7 +450,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                 m = run.step_chunk(t0=t0 if live else None)
                 chunks += 1
                 c = run.last_chunk
-                recorder.chunk(chunks - 1, c["first_step"], c["t0"], [o[0] for o in run.outcomes])
+                recorder.chunk(chunks - 1, c["first_step"], c["t0"], [o[0] for o in run.outcomes], c.get("touches"))
                 last_event = _last_event(run, args.learner) or last_event
                 if view is not None:
                     view.offer(snapshot(run, args, m, t0, fb.dt, last_event))

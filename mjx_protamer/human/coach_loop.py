@@ -33,6 +33,7 @@ from mjx_protamer.human.attention import describe, is_attention
 from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
 from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, env_signal_columns, rule_signals, with_channel
+from mjx_protamer.human.touches import TouchWatcher
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,6 +104,7 @@ class CoachRun:
         self.last_step_used: int | None = None
         self.outcomes: list[tuple] = []  # (event, step or None, reason or None) of the last drain
         self.last_chunk: dict | None = None  # the steps of the last chunk (step_chunk), as TamerRun
+        self.touches = TouchWatcher(env)
 
     def _commit(self) -> None:
         """Committed arrays everywhere (see TamerRun.commit_state): one compile of rollout and update."""
@@ -128,7 +130,9 @@ class CoachRun:
         if isinstance(self.clock, VirtualClock):
             self.clock.set(t0 + n * cfg.dt)
         self.learner.record(first, out["obs"], out["action"], out["logp"])
-        self.last_chunk = {"first_step": first, "t0": t0, "obs": out["obs"], "action": out["action"]}
+        self.last_chunk = {"first_step": first, "t0": t0, "obs": out["obs"], "action": out["action"],
+                           "touches": self.touches.changes(first, out["obs"], out["action"], out["reward_terms"],
+                                                           out.get("region_mask"))}
         if self.teacher is not None:
             sig = rule_signals(self.teacher_cols, out["obs"], out["action"], out["reward_terms"],
                                out.get("region_mask"), xp=np)

@@ -4,7 +4,9 @@
   chunk size, config overrides, seeds), the checkpoint it started from and the SHA-256 of its files,
   and where the voice segments went.
 - `session_chunks.jsonl` (one line per drain of the feedback queue, fsynced): the chunk's first step,
-  the presentation time its steps were stamped with, and every event the learner drained, in order.
+  the presentation time its steps were stamped with, every event the learner drained, in order, and the
+  steps at which each visible touch began or ended (`touches.py`; what `protamer reaction-delay` measures
+  a person's reaction delay against).
   A last line `{"final": true, ...}` holds the events drained at exit.
 
 Replaying feeds those events to the same learner at the same drains (`ScriptedQueue`) with the same
@@ -63,9 +65,13 @@ class SessionRecorder:
         self._fh.flush()
         os.fsync(self._fh.fileno())
 
-    def chunk(self, index: int, first_step: int, t0: float, events: list[FeedbackEvent]) -> None:
-        self._write({"chunk": index, "first_step": int(first_step), "t0": float(t0),
-                     "events": [json.loads(e.to_json()) for e in events]})
+    def chunk(self, index: int, first_step: int, t0: float, events: list[FeedbackEvent],
+              touches: dict | None = None) -> None:
+        record = {"chunk": index, "first_step": int(first_step), "t0": float(t0),
+                  "events": [json.loads(e.to_json()) for e in events]}
+        if touches:
+            record["touches"] = touches
+        self._write(record)
 
     def final(self, events: list[FeedbackEvent]) -> None:
         self._write({"final": True, "events": [json.loads(e.to_json()) for e in events]})

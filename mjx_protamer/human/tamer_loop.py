@@ -35,6 +35,7 @@ from mjx_protamer.human.credit import (CreditAssigner, CreditConfig, StepHistory
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
 from mjx_protamer.human.reward_model import RewardModel, RewardModelConfig
 from mjx_protamer.human.teachers import HostTeacher, TeacherConfig, env_signal_columns, rule_signals, with_channel
+from mjx_protamer.human.touches import TouchWatcher
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,6 +126,7 @@ class TamerRun:
         self.human_params = self.model.params if self.use_model else None
         self.outcomes: list[tuple] = []  # (event, Credit or None, reason or None) of the last drain
         self.last_chunk: dict | None = None  # the watched env's steps of the last chunk (step_chunk)
+        self.touches = TouchWatcher(env)  # the touch onsets a session records (reaction_delay.py reads them)
 
     def commit_state(self) -> None:
         """Put the train state (and reward-model params) on the device as committed arrays. Arrays made
@@ -158,7 +160,9 @@ class TamerRun:
             self.clock.set(t0 + n * fc.dt)
         self.history.record(first, rows["obs"], rows["action"])
         # what a live view draws and a session record keeps: the watched env's steps and their times
-        self.last_chunk = {"first_step": first, "t0": t0, "obs": rows["obs"], "action": rows["action"]}
+        self.last_chunk = {"first_step": first, "t0": t0, "obs": rows["obs"], "action": rows["action"],
+                           "touches": self.touches.changes(first, rows["obs"], rows["action"], rows["reward_terms"],
+                                                           rows["region_mask"])}
         if self.teacher is not None:
             sig = rule_signals(self.teacher_cols, rows["obs"], rows["action"], rows["reward_terms"],
                                rows["region_mask"], xp=np)

@@ -547,3 +547,14 @@ def test_self_touch_session_runs_on_the_live_backend_records_it_and_replays_bit_
     assert env1.backend == env2.backend == live
     assert _leaves_equal(s1.actor_params, s2.actor_params) and _leaves_equal(s1.critic_params, s2.critic_params)
     assert _leaves_equal(s1.env_state, s2.env_state)
+    # the touches the session showed (what `protamer reaction-delay` measures against): per touch, on and off
+    # in turn from 'no touch', each change inside the chunk that recorded it
+    chunks = [r for r in read_session(session)[1] if "first_step" in r]
+    state: dict[str, int] = {}
+    for r in chunks:
+        for name, changes in r.get("touches", {}).items():
+            assert name in {"left_hand", "right_hand", *env1.region_names}, name
+            for step, on in changes:
+                assert r["first_step"] <= step < r["first_step"] + 20 and on == 1 - state.get(name, 0)
+                state[name] = on
+    assert state, "a self-touch session of 60 steps recorded no touch"

@@ -1,0 +1,133 @@
+"""`protamer reaction-delay SESSION`: a person's reaction delay, measured from a recorded finetune session,
+as the channel values credit should use. No JAX (human/reaction_delay.py holds the model)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "reaction-delay",
+        help="measure a person's reaction delay from a recorded finetune session",
+        description="Fits the delay from the onsets of a touch (as the session showed them) to the onsets of the "
+        "feedback that reacted to them, in a `protamer finetune` session where the person gave feedback each "
+        "time they saw that touch begin (docs/human_feedback.md, 'Measuring your reaction delay'). Prints the "
+        "delay's mean, spread and fastest reactions, and the --set values that make credit use them.",
+    )
+    p.add_argument("session", type=Path, help="the --out directory of a `protamer finetune` session (self-touch)")
+    p.add_argument("--touch", default="head",
+                   help="the touch the person reacted to: a body region (hip, lower_body, upper_body, head, "
+                   "left/right_upper_arm, left/right_lower_arm) or left_hand / right_hand (default head: the "
+                   "pretrained infant's hands rest on its body most of the time, so a hand's touch seldom begins; "
+                   "a hand arriving at the head does, every few seconds)")
+    p.add_argument("--sign", choices=("+", "-", "any"), default="any",
+                   help="count only praise (+), only reproach (-) or any nonzero feedback (default)")
+    p.add_argument("--window-s", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="shortest and longest delay that can be a reaction (default 0.1 2.5)")
+    p.add_argument("--min-gap-s", type=float, default=None,
+                   help="a touch begins after at least this long without it (default 0.1: chatter is one touch)")
+    p.add_argument("--json", type=Path, default=None, help="write the fit, per feedback, to this JSON file")
+    p.add_argument("--plot", type=Path, default=None, help="write a PNG of the delays and the fitted distribution")
+    p.set_defaults(handler=_reaction_delay)
+
+
+def _fail(msg: str) -> int:
+    print(f"protamer reaction-delay: {msg}", file=sys.stderr)
+    return 2
+
+
+def _reaction_delay(args: argparse.Namespace) -> int:
+    from mjx_protamer.human import reaction_delay as rd
+    from mjx_protamer.human.session_record import read_session, write_json_atomic
+
+    window = tuple(args.window_s) if args.window_s else rd.WINDOW_S
+    min_gap = rd.MIN_GAP_S if args.min_gap_s is None else args.min_gap_s
+    if not 0 <= window[0] < window[1]:
+        return _fail(f"--window-s needs 0 <= LO < HI, got {window[0]:g} {window[1]:g}")
+    if min_gap < 0:
+        return _fail(f"--min-gap-s must be >= 0, got {min_gap:g}")
+    try:
+        manifest, records = read_session(args.session)
+    except FileNotFoundError as e:
+        return _fail(str(e))
+    dt = float(manifest["feedback_config"]["dt"])
+    intervals = rd.touch_intervals(records, dt)
+    if not intervals:
+        return _fail(f"{args.session} recorded no touches: a session of an env without body regions (the toy), "
+                     "or one recorded before sessions logged touches; record a self-touch session")
+    if args.touch not in intervals:
+        return _fail(f"--touch {args.touch!r} never happened in {args.session}; it recorded: "
+                     + ", ".join(sorted(intervals)))
+    onsets = rd.touch_onsets(intervals[args.touch], min_gap)
+    responses = rd.feedback_onsets(records, args.sign)
+    span = rd.session_span_s(records, dt, int(manifest["chunk_steps"]))
+    try:
+        fit = rd.fit_reaction_delay(onsets, responses, span, window)
+    except rd.NotEnoughReactions as e:
+        return _fail(f"{e}. Give feedback each time {args.touch} starts touching, for 2-3 minutes, or count a "
+                     f"touch's beginning differently (--min-gap-s, now {min_gap:g}; --sign {args.sign}; "
+                     f"--window-s {window[0]:g} {window[1]:g})")
+    channel = manifest.get("feedback_config", {}).get("teacher", {}).get("channel", {})
+    result = {"session": str(args.session), "feedback": manifest.get("feedback"), "touch": args.touch,
+              "sign": args.sign, "min_gap_s": min_gap, "session_s": span, **fit.to_dict(),
+              "overrides": fit.channel_overrides(), "credited_with": channel}
+    print(f"reaction delay to {args.touch} onsets ({manifest.get('feedback')} feedback, {span:.0f} s shown): "
+          f"{fit.n_onsets} onsets (one every {span / max(fit.n_onsets, 1):.1f} s), {fit.n_feedback} feedback "
+          f"events, {fit.reactions:.0f} reactions ({100 * fit.reacted:.0f}% of the feedback)")
+    print(f"  mean {fit.mean_s:.3f} s +- {fit.mean_ci95_s:.3f} (95% CI), std {fit.std_s:.3f} s, "
+          f"fastest (2.5th percentile) {fit.min_s:.3f} s")
+    if channel.get("kind"):
+        from mjx_protamer.human.channels import ChannelConfig
+
+        ch = ChannelConfig(kind=channel["kind"], **{k: channel.get(k) for k in
+                                                     ("delay_mean_s", "delay_std_s", "delay_min_s")})
+        print(f"  the session credited with {ch.kind}'s delay {ch.get('delay_mean_s'):.3f} +- "
+              f"{ch.get('delay_std_s'):.3f} s (fastest {ch.get('delay_min_s'):.3f} s)")
+    print("  credit with: " + " ".join(f"--set {o}" for o in fit.channel_overrides()))
+    if args.json is not None:
+        write_json_atomic(args.json, result)
+        print(f"  wrote {args.json}")
+    if args.plot is not None:
+        _plot(fit, args.touch, args.plot)
+        print(f"  wrote {args.plot}")
+    return 0
+
+
+def _plot(fit, touch: str, path: Path) -> None:
+    """Histogram of each feedback's delay to its likeliest onset, reactions and the rest apart, with the fitted
+    Normal scaled to the reactions; written atomically."""
+    import math
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    d = np.asarray(fit.delays_s)
+    r = np.asarray(fit.responsibility)
+    lo, hi = fit.window_s
+    bins = np.arange(lo, hi + 0.05, 0.05)
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=120)
+    ok = np.isfinite(d)
+    ax.hist([d[ok & (r >= 0.5)], d[ok & (r < 0.5)]], bins=bins, stacked=True, color=["#3b75af", "#bbbbbb"],
+            label=["reactions (P >= 0.5)", "other feedback"])
+    x = np.linspace(lo, hi, 400)
+    pdf = np.exp(-0.5 * ((x - fit.mean_s) / fit.std_s) ** 2) / (fit.std_s * math.sqrt(2 * math.pi))
+    ax.plot(x, pdf * fit.reactions * 0.05, color="#c44e52",
+            label=f"Normal({fit.mean_s:.2f}, {fit.std_s:.2f}) x {fit.reactions:.0f}")
+    ax.axvline(fit.min_s, color="#555555", ls=":", label=f"fastest (2.5%) {fit.min_s:.2f} s")
+    ax.set_xlabel(f"feedback onset - {touch} onset (s)")
+    ax.set_ylabel("feedback events")
+    ax.set_title(f"reaction delay: {fit.mean_s:.3f} +- {fit.mean_ci95_s:.3f} s (95% CI), {fit.n_feedback} events")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}.png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    os.replace(tmp, path)

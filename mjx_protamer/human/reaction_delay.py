@@ -1,0 +1,189 @@
+"""A person's reaction delay, measured from a recorded finetune session. NumPy, no JAX.
+
+Why: credit assignment spreads each feedback over the reaction-delay distribution of its channel, and that
+distribution's spread is what ranks the channels' reward models (docs/experiments.md, "what the channels'
+reaction delays explain": at the keyboard's 0.35 +- 0.1 s the voice channels' models reach the keyboard's;
+at speech's 0.8 +- 0.25 s the keyboard's exact labels fall to speech's level). The presets are assumptions
+from the reaction-time literature; this measures the person in front of the infant, through the channel
+they use, including what the page's frames and the voice front end add.
+
+Protocol (docs/human_feedback.md, "Measuring your reaction delay"): a finetune session in which the person
+gives feedback (a key, or a word) as soon as they see a named touch begin, e.g. "say 'good' each time the
+right hand starts touching"; the session records when each touch began on the presentation clock
+(`touches.py`) and when each feedback began (`t_start`: the key press, or the utterance's onset from the VAD).
+
+Model: a feedback is either a reaction to one of the touch onsets before it, with delay ~ Normal(mean, std)
+inside the window [lo, hi] (a response within 0.1 s of an onset is an anticipation, not a reaction), or
+unrelated (a feedback on something else, a touch missed in the record), at a constant rate over the session.
+For feedback j and onsets i, p(j) = pi * (1/N) sum_i N(t_j - s_i; mean, std) + (1 - pi) / T, N onsets in T
+seconds. EM fits (mean, std, pi), started from a grid of means across the window (the likelihood has a local
+maximum per onset spacing) and the best kept. The channel's `delay_min_s` is the 2.5th percentile of the
+delays of the feedback more likely a reaction than not (the very fastest is often an unrelated feedback).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mjx_protamer.human.attention import is_attention
+
+WINDOW_S = (0.1, 2.5)  # shortest and longest delay counted as a reaction
+# A touch begins when it follows at least this long without that touch (contact chatter of a few steps is one
+# touch). 0.1 s: a person who sees re-touches after gaps of 0.1-0.5 s is fitted within its CI (a keyboard person)
+# or within 0.03 s on average (speech), while at 0.3 s a person who sees re-touches after 0.1 s gaps gets no fit
+# (docs/experiments.md, "Measuring a reaction delay from a session").
+MIN_GAP_S = 0.1
+MIN_REACTIONS = 10  # fewer feedback events with an onset in their window cannot fit a spread
+# In a calibration most feedback reacts to the touch; feedback at random times can still hold a tight cluster
+# of 10-20% "reactions" (4 of 10 random sessions of 100 events in tests), which this rules out.
+MIN_REACTING = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class DelayFit:
+    mean_s: float
+    std_s: float
+    min_s: float  # 2.5th percentile of the delays of the feedback judged reactions (responsibility >= 0.5)
+    mean_ci95_s: float  # 1.96 std / sqrt(reactions)
+    reacted: float  # pi: the fraction of the feedback that reacted to an onset
+    reactions: float  # sum of the responsibilities
+    n_feedback: int
+    n_onsets: int
+    window_s: tuple[float, float]
+    delays_s: tuple[float, ...]  # per feedback: delay to its most likely onset (nan: none in the window)
+    responsibility: tuple[float, ...]  # per feedback: P(a reaction to some onset)
+
+    def channel_overrides(self, prefix: str = "feedback.teacher.channel") -> list[str]:
+        """The `--set` values that make credit (and a simulated teacher) use this delay."""
+        return [f"{prefix}.delay_mean_s={self.mean_s:.3f}", f"{prefix}.delay_std_s={self.std_s:.3f}",
+                f"{prefix}.delay_min_s={self.min_s:.3f}"]
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["delays_s"] = [None if math.isnan(x) else round(x, 5) for x in self.delays_s]
+        d["responsibility"] = [round(x, 5) for x in self.responsibility]
+        d["window_s"] = list(self.window_s)
+        return d
+
+
+class NotEnoughReactions(ValueError):
+    pass
+
+
+def _candidates(onsets: np.ndarray, responses: np.ndarray, window) -> tuple[np.ndarray, np.ndarray]:
+    """(delays (J, M), mask (J, M)): each response's delays to the onsets inside its window."""
+    lo, hi = window
+    first = np.searchsorted(onsets, responses - hi, side="left")
+    last = np.searchsorted(onsets, responses - lo, side="right")
+    m = max(1, int((last - first).max(initial=0)))
+    idx = first[:, None] + np.arange(m)[None, :]
+    mask = idx < last[:, None]
+    delays = responses[:, None] - onsets[np.minimum(idx, len(onsets) - 1)] if len(onsets) else np.zeros_like(idx, float)
+    return np.where(mask, delays, 0.0), mask
+
+
+def _em(delays, mask, rate_ratio: float, mean: float, std: float, iters: int, tol: float):
+    """EM from one start; returns (log-likelihood, mean, std, pi, per-candidate responsibilities)."""
+    pi, ll_prev = 0.5, -np.inf
+    for _ in range(iters):
+        z = (delays - mean) / std
+        dens = np.where(mask, np.exp(-0.5 * z * z) / (std * math.sqrt(2 * math.pi)), 0.0)
+        react = pi * rate_ratio * dens  # rate_ratio = T / N: a reaction's density against the background's 1/T
+        total = react.sum(axis=1) + (1.0 - pi)
+        resp = react / total[:, None]
+        ll = float(np.log(total).sum())
+        w = resp.sum()
+        if w <= 1e-9:
+            return ll, mean, std, 0.0, resp
+        mean = float((resp * delays).sum() / w)
+        std = max(0.01, float(np.sqrt((resp * (delays - mean) ** 2).sum() / w)))
+        pi = float(np.clip(w / len(delays), 1e-6, 1 - 1e-6))
+        if ll - ll_prev < tol:
+            break
+        ll_prev = ll
+    return ll, mean, std, pi, resp
+
+
+def fit_reaction_delay(onsets, responses, duration_s: float, window=WINDOW_S, iters: int = 500,
+                       tol: float = 1e-9) -> DelayFit:
+    """Fit the delay from stimulus onset times and feedback onset times (seconds, one clock) over a session
+    of `duration_s`. Raises NotEnoughReactions when fewer than MIN_REACTIONS feedback have an onset in
+    their window."""
+    onsets = np.sort(np.asarray(onsets, np.float64))
+    responses = np.sort(np.asarray(responses, np.float64))
+    lo, hi = map(float, window)
+    if not 0 <= lo < hi:
+        raise ValueError(f"the delay window must be 0 <= lo < hi, got {window}")
+    delays, mask = _candidates(onsets, responses, (lo, hi))
+    has = mask.any(axis=1)
+    if int(has.sum()) < MIN_REACTIONS:
+        raise NotEnoughReactions(f"only {int(has.sum())} of {len(responses)} feedback events came {lo:g}-{hi:g} s "
+                                 f"after an onset ({len(onsets)} onsets); a fit needs at least {MIN_REACTIONS}")
+    rate_ratio = max(duration_s, hi) / len(onsets)
+    best = None
+    for m0 in np.arange(lo + 0.1, hi, 0.1):
+        out = _em(delays, mask, rate_ratio, float(m0), 0.15, iters, tol)
+        if best is None or out[0] > best[0] + 1e-9:
+            best = out
+    _, mean, std, pi, resp = best
+    react = resp.sum(axis=1)
+    if react.sum() < MIN_REACTIONS or pi < MIN_REACTING:
+        raise NotEnoughReactions(f"only {react.sum():.0f} of {len(responses)} feedback events ({100 * pi:.0f}%) look "
+                                 f"like reactions to the {len(onsets)} onsets; a fit needs at least {MIN_REACTIONS} "
+                                 f"and {100 * MIN_REACTING:.0f}% of the feedback")
+    likeliest = np.where(has, delays[np.arange(len(delays)), resp.argmax(axis=1)], np.nan)
+    sure = (react >= 0.5) & has
+    fastest = float(np.percentile(likeliest[sure], 2.5)) if sure.any() else max(lo, mean - 2.0 * std)
+    n = float(react.sum())
+    return DelayFit(mean_s=mean, std_s=std, min_s=fastest, mean_ci95_s=1.96 * std / math.sqrt(max(n, 1.0)),
+                    reacted=pi, reactions=n, n_feedback=len(responses), n_onsets=len(onsets), window_s=(lo, hi),
+                    delays_s=tuple(float(x) for x in likeliest), responsibility=tuple(float(x) for x in react))
+
+
+# --------------------------------------------------------------------------- a recorded session
+
+def touch_intervals(records: list[dict], dt: float) -> dict[str, list[tuple[float, float]]]:
+    """{touch name: [(t_on, t_off), ...]} on the presentation clock from a session's chunk records
+    (t_off = inf for a touch still on at the end)."""
+    open_at: dict[str, float] = {}
+    out: dict[str, list[tuple[float, float]]] = {}
+    for r in records:
+        if "first_step" not in r:
+            continue
+        for name, changes in (r.get("touches") or {}).items():
+            for step, on in changes:
+                t = r["t0"] + (step - r["first_step"]) * dt
+                if on and name not in open_at:
+                    open_at[name] = t
+                elif not on and name in open_at:
+                    out.setdefault(name, []).append((open_at.pop(name), t))
+    for name, t in open_at.items():
+        out.setdefault(name, []).append((t, math.inf))
+    return {k: sorted(v) for k, v in out.items()}
+
+
+def touch_onsets(intervals: list[tuple[float, float]], min_gap_s: float = MIN_GAP_S) -> np.ndarray:
+    """The times a touch began after at least `min_gap_s` without it (shorter gaps are one touch)."""
+    onsets, last_off = [], -math.inf
+    for on, off in sorted(intervals):
+        if on - last_off >= min_gap_s:
+            onsets.append(on)
+        last_off = max(last_off, off)
+    return np.asarray(onsets, np.float64)
+
+
+def feedback_onsets(records: list[dict], sign: str = "any") -> np.ndarray:
+    """t_start of the session's feedback events (attention events excluded) of a sign: '+', '-' or 'any'
+    (nonzero)."""
+    keep = {"+": lambda v: v > 0, "-": lambda v: v < 0, "any": lambda v: v != 0}[sign]
+    return np.asarray(sorted(e.t_start for r in records for e in r.get("events", [])
+                             if not is_attention(e) and keep(e.value)), np.float64)
+
+
+def session_span_s(records: list[dict], dt: float, chunk_steps: int) -> float:
+    """Seconds of presentation the session's chunks cover."""
+    t0s = [r["t0"] for r in records if "t0" in r]
+    return (max(t0s) - min(t0s) + chunk_steps * dt) if t0s else 0.0

@@ -1,0 +1,162 @@
+"""Measuring a person's reaction delay from a recorded session (human/reaction_delay.py, touches.py,
+`protamer reaction-delay`): the fit recovers known delays from feedback that misses touches and reacts to
+other things, our simulated teacher used as the person, and the command reads a recorded session."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mjx_protamer.cli import main
+from mjx_protamer.human import reaction_delay as rd
+from mjx_protamer.human.events import FeedbackEvent
+from mjx_protamer.human.session_record import SessionRecorder
+from mjx_protamer.human.touches import TouchChanges
+
+
+def _person(mean, std, seconds=120.0, rate=1.0, hit=0.85, unrelated=0.1, seed=0):
+    """Touch onsets (at least 0.3 s apart) and the feedback onsets of a person who reacts to 85% of them
+    with delay max(0.15, Normal(mean, std)) and gives 10% more feedback at random times."""
+    rng = np.random.default_rng(seed)
+    onsets = np.cumsum(0.3 + rng.exponential(1 / rate, size=int(seconds * rate * 2)))
+    onsets = onsets[onsets < seconds]
+    reacted = rng.random(len(onsets)) < hit
+    reactions = onsets[reacted] + np.maximum(0.15, rng.normal(mean, std, reacted.sum()))
+    other = rng.uniform(0, seconds, int(unrelated * len(reactions)))
+    return onsets, np.concatenate([reactions, other])
+
+
+@pytest.mark.parametrize("mean,std", [(0.35, 0.1), (0.8, 0.25)])  # the keyboard's and speech's presets
+def test_fit_recovers_a_known_delay_from_missed_touches_and_unrelated_feedback(mean, std):
+    onsets, responses = _person(mean, std)
+    fit = rd.fit_reaction_delay(onsets, responses, 120.0)
+    assert abs(fit.mean_s - mean) < 0.03 and abs(fit.std_s - std) < 0.05
+    assert abs(fit.mean_s - mean) < 2 * fit.mean_ci95_s + 0.01
+    assert 0.8 < fit.reacted < 0.98  # about 1/1.1 of the feedback reacted
+    assert fit.n_feedback == len(responses) and fit.n_onsets == len(onsets)
+    assert fit.min_s < mean - std  # the fast tail, not the mean
+    over = fit.channel_overrides()
+    assert over[0] == f"feedback.teacher.channel.delay_mean_s={fit.mean_s:.3f}"
+
+
+def test_feedback_unrelated_to_the_touches_is_not_fitted_as_a_delay():
+    """100 feedback events at random times: every one has onsets in its window, and the fit says they do
+    not look like reactions instead of returning a delay; the same onsets with a person's feedback fit."""
+    rng = np.random.default_rng(1)
+    onsets, reactions = _person(0.35, 0.1, seed=1)
+    with pytest.raises(rd.NotEnoughReactions, match="look like reactions"):
+        rd.fit_reaction_delay(onsets, rng.uniform(0, 120, 100), 120.0)
+    assert rd.fit_reaction_delay(onsets, reactions, 120.0).reacted > 0.8
+
+
+def test_too_few_reactions_and_a_bad_window_are_errors():
+    onsets = np.arange(0.0, 60.0, 2.0)
+    with pytest.raises(rd.NotEnoughReactions, match="only 3 of 3 feedback events"):
+        rd.fit_reaction_delay(onsets, onsets[:3] + 0.4, 60.0)
+    with pytest.raises(ValueError, match="0 <= lo < hi"):
+        rd.fit_reaction_delay(onsets, onsets + 0.4, 60.0, window=(1.0, 0.5))
+
+
+def test_touch_changes_across_chunks_become_intervals_and_debounced_onsets():
+    changes = TouchChanges(("right_hand", "head"))
+    # right hand: on at steps 2-4, off 5-6 (a 2-step gap: chatter), on 7-12, off 13-..; head never
+    flags = np.zeros((20, 2), bool)
+    flags[2:5, 0] = flags[7:13, 0] = True
+    records = []
+    for first in (0, 10):  # two chunks of 10 steps shown from t0 = 100 and 100.05 (dt 0.005)
+        records.append({"first_step": first, "t0": 100.0 + first * 0.005,
+                        "touches": changes.update(first, flags[first:first + 10])})
+    assert records[0]["touches"] == {"right_hand": [[2, 1], [5, 0], [7, 1]]}
+    assert records[1]["touches"] == {"right_hand": [[13, 0]]}
+    iv = rd.touch_intervals(records, 0.005)
+    assert list(iv) == ["right_hand"]
+    assert np.allclose(iv["right_hand"], [(100.01, 100.025), (100.035, 100.065)])
+    assert np.allclose(rd.touch_onsets(iv["right_hand"], 0.3), [100.01])  # the 10 ms gap is one touch
+    assert np.allclose(rd.touch_onsets(iv["right_hand"], 0.005), [100.01, 100.035])
+
+
+def test_our_simulated_teacher_as_the_person_gives_back_its_channel_delay():
+    """The keyboard teacher, asked to praise the right hand as soon as it touches (sustain 1, always gives,
+    at most once a second, no mistakes, no silences), watching a hand that touches at random: the fit
+    recovers the channel's reaction delay (0.35 +- 0.1 s) from the events' onsets alone."""
+    from mjx_protamer.human.teachers import Clause, HostTeacher, TeacherConfig
+
+    dt, n = 0.005, 24000  # 2 minutes shown
+    rng = np.random.default_rng(3)
+    touching = np.zeros(n, np.float32)
+    t = 200
+    while t < n:
+        length = int(rng.integers(20, 160))  # touches of 0.1-0.8 s
+        touching[t:t + length] = 1.0
+        t += length + int(rng.integers(100, 500))  # 0.5-2.5 s apart
+    teacher = HostTeacher(TeacherConfig(rule=(Clause("right", 1.0, above=0.5, sustain=1),), give_rate=1.0,
+                                        min_gap_steps=200, flip_prob=0.0, silence_fraction=0.0), dt, seed=0)
+    chunk = 2000
+    for first in range(0, n, chunk):
+        teacher.observe(first, 10.0 + dt * np.arange(first, first + chunk), touching[first:first + chunk, None])
+    given: list[FeedbackEvent] = []
+    teacher.emit_due(type("Collect", (), {"put": lambda self, e: given.append(e) or True})(), math.inf)
+    responses = [e.t_start for e in given]
+    on = np.flatnonzero(np.diff(np.concatenate([[0.0], touching])) > 0)
+    fit = rd.fit_reaction_delay(10.0 + dt * on, responses, n * dt)
+    assert fit.n_feedback >= 0.9 * len(on)
+    assert abs(fit.mean_s - 0.35) < 0.03 and abs(fit.std_s - 0.1) < 0.03, fit
+    assert fit.reacted > 0.9
+
+
+def _record_session(path, onsets_steps, feedback_times, dt=0.005, chunk=50, steps=24000, t0=1000.0):
+    """A recorded session on disk, as `protamer finetune` writes it: the manifest and one line per chunk
+    with its touches and the feedback drained then."""
+    path.mkdir()
+    changes = TouchChanges(("left_hand", "right_hand"))
+    flags = np.zeros((steps, 2), bool)
+    for s in onsets_steps:
+        flags[s:s + 40, 1] = True
+    rec = SessionRecorder(path, {"version": 1, "feedback": "keyboard", "chunk_steps": chunk,
+                                 "feedback_config": {"dt": dt, "teacher": {"channel": {"kind": "keyboard"}}}})
+    feedback = sorted(feedback_times)
+    for i, first in enumerate(range(0, steps, chunk)):
+        start = t0 + first * dt
+        due = [t for t in feedback if t < start + chunk * dt]
+        feedback = feedback[len(due):]
+        rec.chunk(i, first, start, [FeedbackEvent(t, t, "keyboard", 1.0, {"key": "+"}) for t in due],
+                  changes.update(first, flags[first:first + chunk]))
+    rec.close()
+
+
+def test_the_command_measures_a_recorded_session_and_writes_json_and_a_plot(tmp_path, capsys):
+    rng = np.random.default_rng(4)
+    onsets = np.arange(400, 23000, 300) + rng.integers(0, 100, size=len(np.arange(400, 23000, 300)))
+    delays = np.maximum(0.15, rng.normal(0.45, 0.12, len(onsets)))
+    _record_session(tmp_path / "s", onsets, list(1000.0 + onsets * 0.005 + delays))
+    code = main(["reaction-delay", str(tmp_path / "s"), "--touch", "right_hand", "--json", str(tmp_path / "fit.json"),
+                 "--plot", str(tmp_path / "fit.png")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    fit = json.loads((tmp_path / "fit.json").read_text())
+    assert abs(fit["mean_s"] - delays.mean()) < 0.01 and abs(fit["std_s"] - delays.std()) < 0.02
+    assert fit["n_onsets"] == len(onsets) and fit["touch"] == "right_hand"
+    assert "--set feedback.teacher.channel.delay_mean_s=" in out
+    assert (tmp_path / "fit.png").stat().st_size > 10_000
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_the_command_explains_what_is_missing(tmp_path, capsys):
+    assert main(["reaction-delay", str(tmp_path / "nothing")]) == 2
+    assert "is not a recorded finetune session" in capsys.readouterr().err
+    _record_session(tmp_path / "s", [400, 1000], [1002.4, 1005.4])
+    assert main(["reaction-delay", str(tmp_path / "s"), "--touch", "head"]) == 2
+    assert "never happened" in capsys.readouterr().err
+    assert main(["reaction-delay", str(tmp_path / "s"), "--touch", "right_hand"]) == 2
+    err = capsys.readouterr().err
+    assert "only 2 of 2 feedback events" in err and "Give feedback each time right_hand starts touching" in err
+    assert main(["reaction-delay", str(tmp_path / "s"), "--touch", "right_hand", "--window-s", "1", "0.5"]) == 2
+    assert "--window-s needs 0 <= LO < HI" in capsys.readouterr().err
+    empty = tmp_path / "toy"
+    empty.mkdir()
+    SessionRecorder(empty, {"feedback": "keyboard", "chunk_steps": 10, "feedback_config": {"dt": 0.01}}).close()
+    assert main(["reaction-delay", str(empty)]) == 2
+    assert "recorded no touches" in capsys.readouterr().err
