@@ -41,30 +41,34 @@ def _fail(msg: str) -> int:
 
 
 def _reaction_delay(args: argparse.Namespace) -> int:
+    import math
+
     from mjx_protamer.human import reaction_delay as rd
     from mjx_protamer.human.session_record import read_session, write_json_atomic
+    from mjx_protamer.human.touches import shown_touches, touch_onsets
 
     window = tuple(args.window_s) if args.window_s else rd.WINDOW_S
     min_gap = rd.MIN_GAP_S if args.min_gap_s is None else args.min_gap_s
-    if not 0 <= window[0] < window[1]:
-        return _fail(f"--window-s needs 0 <= LO < HI, got {window[0]:g} {window[1]:g}")
-    if min_gap < 0:
-        return _fail(f"--min-gap-s must be >= 0, got {min_gap:g}")
+    if not (0 <= window[0] < window[1] and math.isfinite(window[1])):
+        return _fail(f"--window-s needs 0 <= LO < HI < inf, got {window[0]:g} {window[1]:g}")
+    if not (math.isfinite(min_gap) and min_gap >= 0):
+        return _fail(f"--min-gap-s must be a number >= 0, got {min_gap:g}")
     try:
         manifest, records = read_session(args.session)
+        dt, chunk_steps = float(manifest["feedback_config"]["dt"]), int(manifest["chunk_steps"])
+        intervals, span = shown_touches(records, dt, chunk_steps)
+        responses = rd.feedback_onsets(records, args.sign)
     except FileNotFoundError as e:
         return _fail(str(e))
-    dt = float(manifest["feedback_config"]["dt"])
-    intervals = rd.touch_intervals(records, dt)
+    except (ValueError, KeyError, TypeError, AttributeError) as e:  # a damaged or foreign session record
+        return _fail(f"{args.session}: cannot read the session record ({type(e).__name__}: {e})")
     if not intervals:
         return _fail(f"{args.session} recorded no touches: a session of an env without body regions (the toy), "
                      "or one recorded before sessions logged touches; record a self-touch session")
     if args.touch not in intervals:
         return _fail(f"--touch {args.touch!r} never happened in {args.session}; it recorded: "
                      + ", ".join(sorted(intervals)))
-    onsets = rd.touch_onsets(intervals[args.touch], min_gap)
-    responses = rd.feedback_onsets(records, args.sign)
-    span = rd.session_span_s(records, dt, int(manifest["chunk_steps"]))
+    onsets = touch_onsets(intervals[args.touch], min_gap)
     try:
         fit = rd.fit_reaction_delay(onsets, responses, span, window)
     except rd.NotEnoughReactions as e:
@@ -80,20 +84,26 @@ def _reaction_delay(args: argparse.Namespace) -> int:
           f"events, {fit.reactions:.0f} reactions ({100 * fit.reacted:.0f}% of the feedback)")
     print(f"  mean {fit.mean_s:.3f} s +- {fit.mean_ci95_s:.3f} (95% CI), std {fit.std_s:.3f} s, "
           f"fastest (2.5th percentile) {fit.min_s:.3f} s")
-    if channel.get("kind"):
-        from mjx_protamer.human.channels import ChannelConfig
+    if fit.outside_window > 0.025:
+        print(f"  note: {100 * fit.outside_window:.0f}% of the fitted delays fall outside --window-s "
+              f"{window[0]:g} {window[1]:g}: the std and the reacting fraction are underestimated; widen it")
+    from mjx_protamer.human.channels import KINDS, ChannelConfig
 
+    if channel.get("kind") in KINDS:
         ch = ChannelConfig(kind=channel["kind"], **{k: channel.get(k) for k in
                                                      ("delay_mean_s", "delay_std_s", "delay_min_s")})
         print(f"  the session credited with {ch.kind}'s delay {ch.get('delay_mean_s'):.3f} +- "
               f"{ch.get('delay_std_s'):.3f} s (fastest {ch.get('delay_min_s'):.3f} s)")
     print("  credit with: " + " ".join(f"--set {o}" for o in fit.channel_overrides()))
-    if args.json is not None:
-        write_json_atomic(args.json, result)
-        print(f"  wrote {args.json}")
-    if args.plot is not None:
-        _plot(fit, args.touch, args.plot)
-        print(f"  wrote {args.plot}")
+    try:
+        if args.json is not None:
+            write_json_atomic(args.json, result)
+            print(f"  wrote {args.json}")
+        if args.plot is not None:
+            _plot(fit, args.touch, args.plot)
+            print(f"  wrote {args.plot}")
+    except OSError as e:
+        return _fail(f"cannot write the output: {e}")
     return 0
 
 

@@ -1,15 +1,18 @@
 """What a watcher of a finetune session sees happen: which touches are on at each shown step, as changes.
 
-A live session records, per chunk, the steps at which each visible touch begins and ends
+A session records, per chunk, the steps at which each visible touch begins and ends
 (`session_chunks.jsonl`, key "touches"), so that a person's reaction delay can be measured afterwards from
 their feedback's onsets against the touches they reacted to (`reaction_delay.py`, `protamer reaction-delay`).
 The touches are the lateral rule's two hands (`teachers.LATERAL_RULE`: a hand's touch features above
 0.05 N) and the env's body regions (its `region_mask`), the things a person is asked to react to and the
 page's caption names. An env without regions (the toy) records none. Host NumPy on the chunk's watched
-steps (the signals through `teachers.rule_signals`, the one extraction of rule signals).
+steps (the signals through `teachers.rule_signals`, the one extraction of rule signals); `shown_touches` reads
+them back from a recorded session.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -69,3 +72,53 @@ class TouchWatcher:
 
         flags = rule_signals(self._cols, obs, action, terms, region_mask, xp=np) > self._above
         return self._changes.update(first_step, flags)
+
+
+# --------------------------------------------------------------------------- reading a recorded session
+
+def shown_touches(records: list[dict], dt: float, chunk_steps: int) -> tuple[dict[str, list[tuple]], float]:
+    """({touch name: [(t_on, t_off, began), ...]}, seconds shown) from a session's chunk records, on the
+    presentation clock. `began` is False for a touch already on when a stretch of showing started (the first
+    chunk, or the first after a resume): nobody saw it begin. A resume (a chunk not following the previous
+    one's steps) closes the touches open at the previous chunk's end. The seconds shown count the chunks'
+    own durations, not the pauses between them (the wait for a voice listener, a stop before a resume).
+    Raises ValueError when the clock goes backwards (a simulated session resumed on a new virtual clock)."""
+    open_at: dict[str, tuple[float, bool]] = {}
+    out: dict[str, list[tuple]] = {}
+    chunks = [r for r in records if "first_step" in r]
+    prev = None
+    for r in chunks:
+        first, t0 = int(r["first_step"]), float(r["t0"])
+        if prev is not None:
+            prev_end = prev[1] + chunk_steps * dt
+            if t0 < prev_end - 1e-6:
+                raise ValueError(f"the session's clock goes backwards at step {first} ({t0 - prev_end:+.3f} s): "
+                                 "a simulated session resumed on a new clock; its stretches cannot be joined")
+            if first != prev[0] + chunk_steps:  # resumed: what was on is no longer known to be on
+                for name, (t_on, began) in open_at.items():
+                    out.setdefault(name, []).append((t_on, prev_end, began))
+                open_at.clear()
+        stretch_start = prev is None or first != prev[0] + chunk_steps
+        for name, changes in (r.get("touches") or {}).items():
+            for step, on in changes:
+                t = t0 + (int(step) - first) * dt
+                if on and name not in open_at:
+                    open_at[name] = (t, not (stretch_start and int(step) == first))
+                elif not on and name in open_at:
+                    t_on, began = open_at.pop(name)
+                    out.setdefault(name, []).append((t_on, t, began))
+        prev = (first, t0)
+    for name, (t_on, began) in open_at.items():
+        out.setdefault(name, []).append((t_on, math.inf, began))
+    return {k: sorted(v) for k, v in out.items()}, len(chunks) * chunk_steps * dt
+
+
+def touch_onsets(intervals: list[tuple], min_gap_s: float) -> np.ndarray:
+    """The times a touch was seen to begin after at least `min_gap_s` without it (shorter gaps are one touch).
+    `intervals` are (t_on, t_off[, began]); one not seen to begin still ends the gap before the next."""
+    onsets, last_off = [], -math.inf
+    for on, off, *began in sorted(intervals):
+        if on - last_off >= min_gap_s and (not began or began[0]):
+            onsets.append(on)
+        last_off = max(last_off, off)
+    return np.asarray(onsets, np.float64)
