@@ -86,6 +86,10 @@ def register(subparsers) -> None:
     w.add_argument("--autosave-s", type=float, default=30.0,
                    help="save checkpoint, reward model and configs atomically this often (s; 0: only at exit)")
     w.add_argument("--resume", action="store_true", help="continue the session in --out (after a crash or stop)")
+    w.add_argument("--calibrate", default=None, metavar="TOUCH",
+                   help="measure your reaction delay: give feedback each time TOUCH begins (head, a body region, "
+                   "left_hand or right_hand); at the end the session's delay is fitted (`protamer reaction-delay`) "
+                   "and the --set values for credit printed; OUT/reaction_delay.json and .png")
     w.add_argument("--replay", type=Path, default=None, metavar="SESSION_DIR",
                    help="rerun a recorded session headless into --out, reaching the same final parameters")
     v = p.add_argument_group("voice (--feedback prosody|whisper)")
@@ -167,6 +171,15 @@ def _finetune(args: argparse.Namespace) -> int:
         raise ConfigError("--autosave-s must be >= 0")
     if not 0 <= args.port <= 65535:
         raise ConfigError(f"--port must be in 0..65535, got {args.port}")
+    if args.calibrate is not None:
+        from mjx_protamer.envs.body import REGIONS
+        from mjx_protamer.human.touches import HANDS
+
+        if args.replay is not None:
+            return _fail("--calibrate measures a session as it is given; for a recorded one run "
+                         "`protamer reaction-delay SESSION --touch TOUCH`")
+        if args.calibrate not in (*REGIONS, *HANDS):
+            return _fail(f"--calibrate {args.calibrate!r}: not a touch; use one of " + ", ".join((*REGIONS, *HANDS)))
     if args.replay is not None:
         from mjx_protamer.commands.finetune_replay import replay
         return replay(args)
@@ -230,6 +243,9 @@ def _finetune(args: argparse.Namespace) -> int:
             raise
         return _fail(f"--checkpoint {ckpt} cannot be restored (corrupt, incomplete, or from another version of "
                      f"the config): {type(e).__name__}: {e}")
+    if args.calibrate is not None and loaded[0].env_name != "self_touch":
+        return _fail(f"--calibrate needs a self-touch checkpoint (touches to react to); {ckpt} is a "
+                     f"{loaded[0].env_name} run")
     if not args.resume:
         loaded = _live_env(*loaded)
     elif _recorded_backend(args.out):  # the env the session recorded (COACH resumes from the pretrain config)
@@ -426,7 +442,8 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
         run.log.note(event="resume" if resume else "start", feedback=args.feedback, learner=args.learner,
                      checkpoint=str(args.checkpoint), checkpoint_step=int(step), chunk_steps=chunk_steps, dt=fb.dt)
 
-    from mjx_protamer.commands.finetune_view import default_view, last_event as _last_event, snapshot, start_view
+    from mjx_protamer.commands.finetune_view import (calibration_prompt, default_view, last_event as _last_event,
+                                                     snapshot, start_view)
 
     view_kind = args.view or default_view()
     keys = listener = stop_event = view = None
@@ -483,6 +500,9 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                         how = (" (+ good, - bad, 0 neutral, q quit)" if keys is not None else
                                " (the page's + / - / 0)" if args.feedback == "web" else " (speak)")
                         print("[finetune] ready: give feedback now" + how, flush=True)
+                    if args.calibrate is not None:
+                        print(f"[calibrate] {calibration_prompt(args.calibrate)}; at the end your reaction "
+                              "delay is fitted", flush=True)
                 if args.autosave_s > 0 and time.time() - last_save >= args.autosave_s:
                     t_save = time.time()
                     _save(run, out, args.learner, saved_config, final=False)
@@ -543,6 +563,12 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
             _save(run, out, args.learner, saved_config)
             print(f"[finetune] saved {'coach policy' if args.learner == 'coach' else 'checkpoint, reward model'} "
                   f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
+    if args.calibrate is not None:  # the session is saved whatever the fit says
+        from mjx_protamer.commands.reaction_delay import measure
+
+        print(f"[calibrate] the reaction delay of this session ({args.calibrate} onsets):", flush=True)
+        measure(out, args.calibrate, json_path=out / "reaction_delay.json", plot_path=out / "reaction_delay.png",
+                who="[calibrate] no fit")
     if stopper.signum is not None:
         return 128 + stopper.signum  # 130 for Ctrl-C, 143 for SIGTERM
     if listener_died and not interrupted:  # the run went on without voice feedback: not a success

@@ -28,6 +28,13 @@ def start_view(kind: str, pre, run, port: int):
     return view
 
 
+def calibration_prompt(touch: str) -> str:
+    """What `finetune --calibrate TOUCH` asks of the person, on the terminal and the page."""
+    what = {"left_hand": "the left hand start touching", "right_hand": "the right hand start touching"}.get(
+        touch, f"a hand arrive at the {touch.replace('_', ' ')}")
+    return f"calibration: give feedback (+, or say 'good') as soon as you see {what}, every time"
+
+
 def last_event(run, learner: str) -> dict | None:
     """The last drained event and what became of it, for the page."""
     from mjx_protamer.human.attention import is_attention
@@ -53,6 +60,8 @@ def snapshot(run, args, m, t_wall: float, dt: float, last_event) -> dict:
               "step_reward": float(m["step_reward"]), "events": int(run.events),
               "credited": int(run.credited) if args.learner == "ddpg" else int(run.corrections),
               "updates": int(run.model.updates) if args.learner == "ddpg" else int(run.learner.updates)}
+    if getattr(args, "calibrate", None):
+        status["prompt"] = calibration_prompt(args.calibrate)
     return {"first_step": int(c["first_step"]), "t0": float(t_wall), "dt": float(dt),
             "obs": np.asarray(c["obs"], np.float32), "action": np.asarray(c["action"], np.float32),
             "r_hat": r_hat, "status": status, "last_event": last_event}

@@ -35,51 +35,62 @@ def register(subparsers) -> None:
     p.set_defaults(handler=_reaction_delay)
 
 
-def _fail(msg: str) -> int:
-    print(f"protamer reaction-delay: {msg}", file=sys.stderr)
+def _fail(msg: str, who: str = "protamer reaction-delay") -> int:
+    print(f"{who}: {msg}", file=sys.stderr)
     return 2
 
 
 def _reaction_delay(args: argparse.Namespace) -> int:
+    return measure(args.session, args.touch, args.sign, args.window_s, args.min_gap_s, args.json, args.plot)
+
+
+def measure(session: Path, touch: str, sign: str = "any", window_s=None, min_gap_s: float | None = None,
+            json_path: Path | None = None, plot_path: Path | None = None,
+            who: str = "protamer reaction-delay") -> int:
+    """Fit and print the reaction delay of a recorded session (also the end of `finetune --calibrate`);
+    0, or 2 with a one-line reason on stderr."""
     import math
 
     from mjx_protamer.human import reaction_delay as rd
     from mjx_protamer.human.session_record import read_session, write_json_atomic
     from mjx_protamer.human.touches import shown_touches, touch_onsets
 
-    window = tuple(args.window_s) if args.window_s else rd.WINDOW_S
-    min_gap = rd.MIN_GAP_S if args.min_gap_s is None else args.min_gap_s
+    def fail(msg: str) -> int:
+        return _fail(msg, who)
+
+    window = tuple(window_s) if window_s else rd.WINDOW_S
+    min_gap = rd.MIN_GAP_S if min_gap_s is None else min_gap_s
     if not (0 <= window[0] < window[1] and math.isfinite(window[1])):
-        return _fail(f"--window-s needs 0 <= LO < HI < inf, got {window[0]:g} {window[1]:g}")
+        return fail(f"--window-s needs 0 <= LO < HI < inf, got {window[0]:g} {window[1]:g}")
     if not (math.isfinite(min_gap) and min_gap >= 0):
-        return _fail(f"--min-gap-s must be a number >= 0, got {min_gap:g}")
+        return fail(f"--min-gap-s must be a number >= 0, got {min_gap:g}")
     try:
-        manifest, records = read_session(args.session)
+        manifest, records = read_session(session)
         dt, chunk_steps = float(manifest["feedback_config"]["dt"]), int(manifest["chunk_steps"])
         intervals, span = shown_touches(records, dt, chunk_steps)
-        responses = rd.feedback_onsets(records, args.sign)
+        responses = rd.feedback_onsets(records, sign)
     except FileNotFoundError as e:
-        return _fail(str(e))
+        return fail(str(e))
     except (ValueError, KeyError, TypeError, AttributeError) as e:  # a damaged or foreign session record
-        return _fail(f"{args.session}: cannot read the session record ({type(e).__name__}: {e})")
+        return fail(f"{session}: cannot read the session record ({type(e).__name__}: {e})")
     if not intervals:
-        return _fail(f"{args.session} recorded no touches: a session of an env without body regions (the toy), "
+        return fail(f"{session} recorded no touches: a session of an env without body regions (the toy), "
                      "or one recorded before sessions logged touches; record a self-touch session")
-    if args.touch not in intervals:
-        return _fail(f"--touch {args.touch!r} never happened in {args.session}; it recorded: "
+    if touch not in intervals:
+        return fail(f"--touch {touch!r} never happened in {session}; it recorded: "
                      + ", ".join(sorted(intervals)))
-    onsets = touch_onsets(intervals[args.touch], min_gap)
+    onsets = touch_onsets(intervals[touch], min_gap)
     try:
         fit = rd.fit_reaction_delay(onsets, responses, span, window)
     except rd.NotEnoughReactions as e:
-        return _fail(f"{e}. Give feedback each time {args.touch} starts touching, for 2-3 minutes, or count a "
-                     f"touch's beginning differently (--min-gap-s, now {min_gap:g}; --sign {args.sign}; "
+        return fail(f"{e}. Give feedback each time {touch} starts touching, for 2-3 minutes, or count a "
+                     f"touch's beginning differently (--min-gap-s, now {min_gap:g}; --sign {sign}; "
                      f"--window-s {window[0]:g} {window[1]:g})")
     channel = manifest.get("feedback_config", {}).get("teacher", {}).get("channel", {})
-    result = {"session": str(args.session), "feedback": manifest.get("feedback"), "touch": args.touch,
-              "sign": args.sign, "min_gap_s": min_gap, "session_s": span, **fit.to_dict(),
+    result = {"session": str(session), "feedback": manifest.get("feedback"), "touch": touch,
+              "sign": sign, "min_gap_s": min_gap, "session_s": span, **fit.to_dict(),
               "overrides": fit.channel_overrides(), "credited_with": channel}
-    print(f"reaction delay to {args.touch} onsets ({manifest.get('feedback')} feedback, {span:.0f} s shown): "
+    print(f"reaction delay to {touch} onsets ({manifest.get('feedback')} feedback, {span:.0f} s shown): "
           f"{fit.n_onsets} onsets (one every {span / max(fit.n_onsets, 1):.1f} s), {fit.n_feedback} feedback "
           f"events, {fit.reactions:.0f} reactions ({100 * fit.reacted:.0f}% of the feedback)")
     print(f"  mean {fit.mean_s:.3f} s +- {fit.mean_ci95_s:.3f} (95% CI), std {fit.std_s:.3f} s, "
@@ -96,14 +107,14 @@ def _reaction_delay(args: argparse.Namespace) -> int:
               f"{ch.get('delay_std_s'):.3f} s (fastest {ch.get('delay_min_s'):.3f} s)")
     print("  credit with: " + " ".join(f"--set {o}" for o in fit.channel_overrides()))
     try:
-        if args.json is not None:
-            write_json_atomic(args.json, result)
-            print(f"  wrote {args.json}")
-        if args.plot is not None:
-            _plot(fit, args.touch, args.plot)
-            print(f"  wrote {args.plot}")
+        if json_path is not None:
+            write_json_atomic(json_path, result)
+            print(f"  wrote {json_path}")
+        if plot_path is not None:
+            _plot(fit, touch, plot_path)
+            print(f"  wrote {plot_path}")
     except OSError as e:
-        return _fail(f"cannot write the output: {e}")
+        return fail(f"cannot write the output: {e}")
     return 0
 
 

@@ -504,6 +504,15 @@ def test_kill_9_of_a_session_loses_at_most_the_autosave_interval_and_resume_cont
     assert checkpoints.manager(out / "checkpoints").latest_step() == step + 100
 
 
+def test_calibration_argument_errors(toy_run, tmp_path, capsys):
+    assert run_main("--feedback", "none", "--checkpoint", toy_run, "--calibrate", "nose") == 2
+    assert "--calibrate 'nose': not a touch; use one of hip, lower_body" in capsys.readouterr().err
+    assert run_main("--replay", tmp_path, "--out", tmp_path / "again", "--calibrate", "head") == 2
+    assert "for a recorded one run `protamer reaction-delay SESSION" in capsys.readouterr().err
+    assert run_main("--feedback", "none", "--checkpoint", toy_run, "--out", tmp_path / "c", "--calibrate", "head") == 2
+    assert "--calibrate needs a self-touch checkpoint (touches to react to)" in capsys.readouterr().err
+
+
 def test_resume_and_replay_argument_errors(tmp_path, capsys):
     assert run_main("--feedback", "none", "--resume") == 2
     assert "--resume needs --out" in capsys.readouterr().err
@@ -534,8 +543,14 @@ def test_self_touch_session_runs_on_the_live_backend_records_it_and_replays_bit_
     live = resolve_backend("auto", num_envs=1)
     session, again = tmp_path / "session", tmp_path / "replay"
     assert run_main("--feedback", "simulated:keyboard", "--checkpoint", pre, "--out", session,
-                    "--chunk-ms", "100", "--max-chunks", "3", *TEACHER) == 0
-    assert f"[finetune] physics backend: {live} (the fastest for one world here)" in capsys.readouterr().out
+                    "--chunk-ms", "100", "--max-chunks", "3", "--calibrate", "head", *TEACHER) == 0
+    said = capsys.readouterr()
+    assert f"[finetune] physics backend: {live} (the fastest for one world here)" in said.out
+    # a calibration of 0.3 s: the task is said, and the fit at the end explains why there is none
+    assert "[calibrate] calibration: give feedback (+, or say 'good') as soon as you see a hand arrive at the " \
+           "head" in said.out
+    assert "[calibrate] the reaction delay of this session (head onsets):" in said.out
+    assert "[calibrate] no fit: " in said.err and not (session / "reaction_delay.json").exists()
     manifest, _ = read_session(session)
     assert manifest["env_backend"] == live
     assert load_config(PretrainConfig, session / "config.yaml").env.backend == live

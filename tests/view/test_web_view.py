@@ -125,3 +125,76 @@ def test_live_page_in_headless_chromium_shows_the_run_feeds_the_queue_and_says_w
     assert "silence_needs_attention: a silent step teaches" in text
     assert text.count("accepted, credited steps") == 2
     assert "[view] closed" in text and (tmp_path / "live_page.png").stat().st_size > 10_000
+
+
+class _StatusOnly:
+    """A player with no pictures whose status carries what a session would put there."""
+
+    def __init__(self, status: dict):
+        self.status = status
+
+    def latest(self):
+        return 0, None
+
+    def status_message(self) -> dict:
+        return {"type": "status", **self.status}
+
+
+def _serve_in_thread(app):
+    """Serve an aiohttp app on a free port from a background event loop; (url base, stop)."""
+    import asyncio
+
+    from mjx_protamer.view.server import serve
+
+    loop = asyncio.new_event_loop()
+    started = threading.Event()
+    box = {}
+
+    def run():
+        asyncio.set_event_loop(loop)
+        box["runner"], box["port"] = loop.run_until_complete(serve(app))
+        started.set()
+        loop.run_forever()
+
+    threading.Thread(target=run, daemon=True).start()
+    assert started.wait(30)
+
+    def stop():
+        asyncio.run_coroutine_threadsafe(box["runner"].cleanup(), loop).result(10)
+        loop.call_soon_threadsafe(loop.stop)
+
+    return f"http://127.0.0.1:{box['port']}", stop
+
+
+def test_a_calibration_session_shows_its_task_on_the_page_and_an_ordinary_one_does_not():
+    """`finetune --calibrate head` puts its prompt in the status; the page shows it above the picture, where a
+    person looks, and shows nothing there for an ordinary session."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("needs Debian's chromium (apt-get install chromium; scripts/test.sh does as root)")
+    from mjx_protamer.commands.finetune_view import calibration_prompt
+    from mjx_protamer.human.queue import FeedbackQueue
+    from mjx_protamer.view.server import make_app
+
+    prompt = calibration_prompt("head")
+    assert "as soon as you see a hand arrive at the head" in prompt
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
+        for status, shown in (({"learner": "ddpg", "feedback": "web", "prompt": prompt}, True),
+                              ({"learner": "ddpg", "feedback": "web"}, False)):
+            base, stop = _serve_in_thread(make_app(_StatusOnly(status), FeedbackQueue(8), token="t"))
+            try:
+                page = browser.new_page(viewport={"width": 1000, "height": 640})
+                assert page.goto(f"{base}/?token=t").status == 200
+                page.wait_for_function("document.getElementById('learner').textContent.startsWith('ddpg')",
+                                       timeout=20_000)
+                assert page.locator("#prompt").is_visible() is shown
+                if shown:
+                    assert page.inner_text("#prompt") == prompt
+                    box, frame = page.locator("#prompt").bounding_box(), page.locator("#frame").bounding_box()
+                    assert box["y"] + box["height"] <= frame["y"]  # above the picture
+                page.close()
+            finally:
+                stop()
+        browser.close()
