@@ -8,17 +8,19 @@ from the reaction-time literature; this measures the person in front of the infa
 they use, including what the page's frames and the voice front end add.
 
 Protocol (docs/human_feedback.md, "Measuring your reaction delay"): a finetune session in which the person
-gives feedback (a key, or a word) as soon as they see a named touch begin, e.g. "say 'good' each time the
-right hand starts touching"; the session records when each touch began on the presentation clock
-(`touches.py`, `shown_touches`) and when each feedback began (`t_start`: the key press, or the utterance's onset from the VAD).
+gives feedback (a key, or a word) as soon as they see a named touch begin, e.g. "say 'good' each time a hand
+arrives at the head" (`finetune --calibrate head`); the session records when each touch began on the
+presentation clock (`touches.py`, `shown_touches`) and when each feedback began (`t_start`: the key press, or
+the utterance's onset from the VAD).
 
 Model: a feedback is either a reaction to one of the touch onsets before it, with delay ~ Normal(mean, std)
 inside the window [lo, hi] (a response within 0.1 s of an onset is an anticipation, not a reaction), or
 unrelated (a feedback on something else, a touch missed in the record), at a constant rate over the session.
 For feedback j and onsets i, p(j) = pi * (1/N) sum_i N(t_j - s_i; mean, std) + (1 - pi) / T, N onsets in T
 seconds. EM fits (mean, std, pi), started from a grid of means across the window (the likelihood has a local
-maximum per onset spacing) and the best kept. The channel's `delay_min_s` is the 2.5th percentile of the
-delays of the feedback more likely a reaction than not (the very fastest is often an unrelated feedback).
+maximum per onset spacing) and the best kept; the mean's CI by bootstrap over the feedback. The channel's
+`delay_min_s` is the 2.5th percentile of the delays of the feedback more likely a reaction than not (the very
+fastest is often an unrelated feedback).
 """
 
 from __future__ import annotations
