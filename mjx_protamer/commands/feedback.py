@@ -180,6 +180,9 @@ def _finetune(args: argparse.Namespace) -> int:
                          "`protamer reaction-delay SESSION --touch TOUCH`")
         if args.calibrate not in (*REGIONS, *HANDS):
             return _fail(f"--calibrate {args.calibrate!r}: not a touch; use one of " + ", ".join((*REGIONS, *HANDS)))
+        if args.feedback == "none":
+            return _fail("--calibrate measures how fast feedback follows a touch: it needs feedback (keyboard, web, "
+                         "whisper, prosody; a simulated teacher reacts to its rule, not to the touch)")
     if args.replay is not None:
         from mjx_protamer.commands.finetune_replay import replay
         return replay(args)
@@ -224,9 +227,12 @@ def _finetune(args: argparse.Namespace) -> int:
     from mjx_protamer.errors import CheckpointError
     from mjx_protamer.experiments.run_loader import resolve_checkpoint
     try:
-        resolve_checkpoint(ckpt)
+        run_dir = resolve_checkpoint(ckpt)[0]
     except CheckpointError as e:
         return _fail(f"--checkpoint: {e} (expected DIR/config.yaml and DIR/checkpoints/<step>/)")
+    if args.calibrate is not None and _env_name(run_dir) != "self_touch":
+        return _fail(f"--calibrate needs a self-touch checkpoint (touches to react to); {ckpt} is a "
+                     f"{_env_name(run_dir)} run")
 
     from mjx_protamer.commands.train import _enable_compile_cache
 
@@ -243,14 +249,21 @@ def _finetune(args: argparse.Namespace) -> int:
             raise
         return _fail(f"--checkpoint {ckpt} cannot be restored (corrupt, incomplete, or from another version of "
                      f"the config): {type(e).__name__}: {e}")
-    if args.calibrate is not None and loaded[0].env_name != "self_touch":
-        return _fail(f"--calibrate needs a self-touch checkpoint (touches to react to); {ckpt} is a "
-                     f"{loaded[0].env_name} run")
     if not args.resume:
         loaded = _live_env(*loaded)
     elif _recorded_backend(args.out):  # the env the session recorded (COACH resumes from the pretrain config)
         loaded = _live_env(*loaded, _recorded_backend(args.out))
     return _session(args, live, voice, *loaded)
+
+
+def _env_name(run_dir: Path) -> str:
+    """The env of a run directory, from its config.yaml without loading it (self_touch when unnamed)."""
+    import yaml
+
+    try:
+        return str((yaml.safe_load((run_dir / "config.yaml").read_text()) or {}).get("env_name", "self_touch"))
+    except (OSError, yaml.YAMLError, AttributeError):
+        return "unreadable"
 
 
 def _needs_attention(args) -> bool:
@@ -432,6 +445,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     "feedback_config": to_dict(fb), "listen_source": args.listen_source,
                     "segments": str(args.save_segments or (out / "segments")) if voice is not None else None,
                     "env_backend": pre.env.backend if pre.env_name == "self_touch" else None,
+                    "calibrate": args.calibrate,
                     "started": time.time(), **_checkpoint_identity(Path(args.checkpoint), step)}
     if getattr(run, "attention", None) is not None:
         print("[finetune] credit.silence_needs_attention: a silent step teaches 'nothing to say' only while the "
@@ -563,19 +577,28 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
             _save(run, out, args.learner, saved_config)
             print(f"[finetune] saved {'coach policy' if args.learner == 'coach' else 'checkpoint, reward model'} "
                   f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
+    fitted = 0
     if args.calibrate is not None:  # the session is saved whatever the fit says
         from mjx_protamer.commands.reaction_delay import measure
 
+        for old in (out / "reaction_delay.json", out / "reaction_delay.png"):  # an earlier stretch's fit
+            old.unlink(missing_ok=True)
         print(f"[calibrate] the reaction delay of this session ({args.calibrate} onsets):", flush=True)
-        measure(out, args.calibrate, json_path=out / "reaction_delay.json", plot_path=out / "reaction_delay.png",
-                who="[calibrate] no fit")
+        fitted = measure(out, args.calibrate, json_path=out / "reaction_delay.json",
+                         plot_path=out / "reaction_delay.png", who="[calibrate] no fit",
+                         rerun=f"protamer reaction-delay {out}")
     if stopper.signum is not None:
         return 128 + stopper.signum  # 130 for Ctrl-C, 143 for SIGTERM
     if listener_died and not interrupted:  # the run went on without voice feedback: not a success
         print(f"[finetune] exit code {max(listener.exitcode, 1)}: the voice listener died during the session "
               f"(see above); everything up to then is saved", flush=True)
         return max(listener.exitcode, 1)
-    return 130 if interrupted else 0
+    if interrupted:
+        return 130
+    if fitted:
+        print(f"[finetune] exit code {fitted}: the session is saved, its reaction delay could not be fitted (above)",
+              flush=True)
+    return fitted
 
 
 def _coach_resume_step(out: Path) -> int:

@@ -19,11 +19,11 @@ def register(subparsers) -> None:
         "delay's mean, spread and fastest reactions, and the --set values that make credit use them.",
     )
     p.add_argument("session", type=Path, help="the --out directory of a `protamer finetune` session (self-touch)")
-    p.add_argument("--touch", default="head",
+    p.add_argument("--touch", default=None,
                    help="the touch the person reacted to: a body region (hip, lower_body, upper_body, head, "
-                   "left/right_upper_arm, left/right_lower_arm) or left_hand / right_hand (default head: the "
-                   "pretrained infant's hands rest on its body most of the time, so a hand's touch seldom begins; "
-                   "a hand arriving at the head does, every few seconds)")
+                   "left/right_upper_arm, left/right_lower_arm) or left_hand / right_hand (default: the session's "
+                   "--calibrate touch, else head: the pretrained infant's hands rest on its body most of the time, "
+                   "so a hand's touch seldom begins; a hand arriving at the head does, every few seconds)")
     p.add_argument("--sign", choices=("+", "-", "any"), default="any",
                    help="count only praise (+), only reproach (-) or any nonzero feedback (default)")
     p.add_argument("--window-s", type=float, nargs=2, default=None, metavar=("LO", "HI"),
@@ -44,11 +44,12 @@ def _reaction_delay(args: argparse.Namespace) -> int:
     return measure(args.session, args.touch, args.sign, args.window_s, args.min_gap_s, args.json, args.plot)
 
 
-def measure(session: Path, touch: str, sign: str = "any", window_s=None, min_gap_s: float | None = None,
+def measure(session: Path, touch: str | None, sign: str = "any", window_s=None, min_gap_s: float | None = None,
             json_path: Path | None = None, plot_path: Path | None = None,
-            who: str = "protamer reaction-delay") -> int:
+            who: str = "protamer reaction-delay", rerun: str = "") -> int:
     """Fit and print the reaction delay of a recorded session (also the end of `finetune --calibrate`);
-    0, or 2 with a one-line reason on stderr."""
+    0, or 2 with a one-line reason on stderr. `touch` None: the session's --calibrate touch, else head.
+    `rerun`: the command that refits with other options (named in the advice when it is not this one)."""
     import math
 
     from mjx_protamer.human import reaction_delay as rd
@@ -67,12 +68,15 @@ def measure(session: Path, touch: str, sign: str = "any", window_s=None, min_gap
     try:
         manifest, records = read_session(session)
         dt, chunk_steps = float(manifest["feedback_config"]["dt"]), int(manifest["chunk_steps"])
+        touch = touch or manifest.get("calibrate") or "head"
         intervals, span = shown_touches(records, dt, chunk_steps)
         responses = rd.feedback_onsets(records, sign)
     except FileNotFoundError as e:
         return fail(str(e))
     except (ValueError, KeyError, TypeError, AttributeError) as e:  # a damaged or foreign session record
         return fail(f"{session}: cannot read the session record ({type(e).__name__}: {e})")
+    if not any("first_step" in r for r in records):
+        return fail(f"{session} showed no chunk (stopped while loading)")
     if not intervals:
         return fail(f"{session} recorded no touches: a session of an env without body regions (the toy), "
                      "or one recorded before sessions logged touches; record a self-touch session")
@@ -84,8 +88,8 @@ def measure(session: Path, touch: str, sign: str = "any", window_s=None, min_gap
         fit = rd.fit_reaction_delay(onsets, responses, span, window)
     except rd.NotEnoughReactions as e:
         return fail(f"{e}. Give feedback each time {touch} starts touching, for 2-3 minutes, or count a "
-                     f"touch's beginning differently (--min-gap-s, now {min_gap:g}; --sign {sign}; "
-                     f"--window-s {window[0]:g} {window[1]:g})")
+                     f"touch's beginning differently ({rerun + ' ' if rerun else ''}--min-gap-s, now {min_gap:g}; "
+                     f"--sign {sign}; --window-s {window[0]:g} {window[1]:g})")
     channel = manifest.get("feedback_config", {}).get("teacher", {}).get("channel", {})
     result = {"session": str(session), "feedback": manifest.get("feedback"), "touch": touch,
               "sign": sign, "min_gap_s": min_gap, "session_s": span, **fit.to_dict(),

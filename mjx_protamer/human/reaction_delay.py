@@ -136,7 +136,7 @@ def fit_reaction_delay(onsets, responses, duration_s: float, window=WINDOW_S, it
             best = out
     _, mean, std, pi, resp = best
     react = resp.sum(axis=1)
-    if react.sum() < MIN_REACTIONS or pi < MIN_REACTING:
+    if react.sum() < MIN_REACTIONS - 1e-3 or pi < MIN_REACTING:  # (pi is clipped below 1)
         raise NotEnoughReactions(f"only {react.sum():.0f} of {len(responses)} feedback events ({100 * pi:.0f}%) look "
                                  f"like reactions to the {len(onsets)} onsets; a fit needs at least {MIN_REACTIONS} "
                                  f"and {100 * MIN_REACTING:.0f}% of the feedback")

@@ -78,39 +78,41 @@ class TouchWatcher:
 
 def shown_touches(records: list[dict], dt: float, chunk_steps: int) -> tuple[dict[str, list[tuple]], float]:
     """({touch name: [(t_on, t_off, began), ...]}, seconds shown) from a session's chunk records, on the
-    presentation clock. `began` is False for a touch already on when a stretch of showing started (the first
-    chunk, or the first after a resume): nobody saw it begin. A resume (a chunk not following the previous
-    one's steps) closes the touches open at the previous chunk's end. The seconds shown count the chunks'
-    own durations, not the pauses between them (the wait for a voice listener, a stop before a resume).
-    Raises ValueError when the clock goes backwards (a simulated session resumed on a new virtual clock)."""
+    presentation clock.
+
+    A session process records its chunks from index 0; a resume starts again at 0 (and a fresh TouchChanges,
+    which assumes no touch is on). So each stretch of index 0, 1, ... is one process's showing: its first chunk
+    was computed before the view and the feedback sources started (nobody saw it), so it counts neither as shown
+    time nor for onsets, and a touch on during it has `began` False; a new stretch closes the touches open at
+    the end of the previous one. The seconds shown count the shown chunks' own durations, not the pauses
+    between chunks (a voice listener loading, a stop before a resume). Raises ValueError when the clock goes
+    backwards (a simulated session resumed on a new virtual clock: its stretches cannot be joined)."""
     open_at: dict[str, tuple[float, bool]] = {}
     out: dict[str, list[tuple]] = {}
-    chunks = [r for r in records if "first_step" in r]
-    prev = None
-    for r in chunks:
+    shown, prev_end = 0, None
+    for r in (r for r in records if "first_step" in r):
         first, t0 = int(r["first_step"]), float(r["t0"])
-        if prev is not None:
-            prev_end = prev[1] + chunk_steps * dt
-            if t0 < prev_end - 1e-6:
-                raise ValueError(f"the session's clock goes backwards at step {first} ({t0 - prev_end:+.3f} s): "
-                                 "a simulated session resumed on a new clock; its stretches cannot be joined")
-            if first != prev[0] + chunk_steps:  # resumed: what was on is no longer known to be on
-                for name, (t_on, began) in open_at.items():
-                    out.setdefault(name, []).append((t_on, prev_end, began))
-                open_at.clear()
-        stretch_start = prev is None or first != prev[0] + chunk_steps
+        if prev_end is not None and t0 < prev_end - 1e-6:
+            raise ValueError(f"the session's clock goes backwards at step {first} ({t0 - prev_end:+.3f} s): "
+                             "a simulated session resumed on a new clock; its stretches cannot be joined")
+        unseen = int(r.get("chunk", 0)) == 0  # a process's first chunk: a new stretch, never shown
+        if unseen and prev_end is not None:
+            for name, (t_on, began) in open_at.items():
+                out.setdefault(name, []).append((t_on, prev_end, began))
+            open_at.clear()
+        shown += 0 if unseen else 1
         for name, changes in (r.get("touches") or {}).items():
             for step, on in changes:
                 t = t0 + (int(step) - first) * dt
                 if on and name not in open_at:
-                    open_at[name] = (t, not (stretch_start and int(step) == first))
+                    open_at[name] = (t, not unseen)
                 elif not on and name in open_at:
                     t_on, began = open_at.pop(name)
                     out.setdefault(name, []).append((t_on, t, began))
-        prev = (first, t0)
+        prev_end = t0 + chunk_steps * dt
     for name, (t_on, began) in open_at.items():
         out.setdefault(name, []).append((t_on, math.inf, began))
-    return {k: sorted(v) for k, v in out.items()}, len(chunks) * chunk_steps * dt
+    return {k: sorted(v) for k, v in out.items()}, shown * chunk_steps * dt
 
 
 def touch_onsets(intervals: list[tuple], min_gap_s: float) -> np.ndarray:

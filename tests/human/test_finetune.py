@@ -509,8 +509,13 @@ def test_calibration_argument_errors(toy_run, tmp_path, capsys):
     assert "--calibrate 'nose': not a touch; use one of hip, lower_body" in capsys.readouterr().err
     assert run_main("--replay", tmp_path, "--out", tmp_path / "again", "--calibrate", "head") == 2
     assert "for a recorded one run `protamer reaction-delay SESSION" in capsys.readouterr().err
-    assert run_main("--feedback", "none", "--checkpoint", toy_run, "--out", tmp_path / "c", "--calibrate", "head") == 2
-    assert "--calibrate needs a self-touch checkpoint (touches to react to)" in capsys.readouterr().err
+    assert run_main("--feedback", "none", "--checkpoint", toy_run, "--calibrate", "head") == 2
+    assert "--calibrate measures how fast feedback follows a touch: it needs feedback" in capsys.readouterr().err
+    assert run_main("--feedback", "simulated:keyboard", "--checkpoint", toy_run, "--out", tmp_path / "c",
+                    "--calibrate", "head") == 2
+    said = capsys.readouterr()
+    assert "--calibrate needs a self-touch checkpoint (touches to react to)" in said.err
+    assert "[finetune] loading" not in said.out  # refused before loading anything
 
 
 def test_resume_and_replay_argument_errors(tmp_path, capsys):
@@ -542,15 +547,18 @@ def test_self_touch_session_runs_on_the_live_backend_records_it_and_replays_bit_
     assert load_config(PretrainConfig, pre / "config.yaml").env.backend == "native"
     live = resolve_backend("auto", num_envs=1)
     session, again = tmp_path / "session", tmp_path / "replay"
+    # a calibration of 0.2 s shown: the session is saved, and exit code 2 says the fit could not be made
     assert run_main("--feedback", "simulated:keyboard", "--checkpoint", pre, "--out", session,
-                    "--chunk-ms", "100", "--max-chunks", "3", "--calibrate", "head", *TEACHER) == 0
+                    "--chunk-ms", "100", "--max-chunks", "3", "--calibrate", "head", *TEACHER) == 2
     said = capsys.readouterr()
     assert f"[finetune] physics backend: {live} (the fastest for one world here)" in said.out
-    # a calibration of 0.3 s: the task is said, and the fit at the end explains why there is none
     assert "[calibrate] calibration: give feedback (+, or say 'good') as soon as you see a hand arrive at the " \
            "head" in said.out
     assert "[calibrate] the reaction delay of this session (head onsets):" in said.out
     assert "[calibrate] no fit: " in said.err and not (session / "reaction_delay.json").exists()
+    assert "cannot read" not in said.err and ("never happened" in said.err or "feedback events" in said.err), said.err
+    assert "exit code 2: the session is saved, its reaction delay could not be fitted" in said.out
+    assert read_session(session)[0]["calibrate"] == "head"
     manifest, _ = read_session(session)
     assert manifest["env_backend"] == live
     assert load_config(PretrainConfig, session / "config.yaml").env.backend == live

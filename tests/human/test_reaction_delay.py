@@ -66,6 +66,8 @@ def test_too_few_reactions_and_a_bad_window_are_errors():
     onsets = np.arange(0.0, 60.0, 2.0)
     with pytest.raises(rd.NotEnoughReactions, match="only 3 of 3 feedback events"):
         rd.fit_reaction_delay(onsets, onsets[:3] + 0.4, 60.0)
+    ten = rd.fit_reaction_delay(onsets, onsets[:10] + 0.4 + 0.01 * np.arange(10), 60.0)  # exactly enough
+    assert ten.reactions > 9.99 and abs(ten.mean_s - 0.445) < 0.01
     for window in ((1.0, 0.5), (0.1, math.inf)):
         with pytest.raises(ValueError, match="0 <= lo < hi < inf"):
             rd.fit_reaction_delay(onsets, onsets + 0.4, 60.0, window=window)
@@ -75,38 +77,43 @@ def test_too_few_reactions_and_a_bad_window_are_errors():
 
 def test_touch_changes_across_chunks_become_intervals_and_debounced_onsets():
     changes = TouchChanges(("right_hand", "head"))
-    # right hand: on at steps 2-4, off 5-6 (a 2-step gap: chatter), on 7-12, off 13-..; head never
-    flags = np.zeros((20, 2), bool)
-    flags[2:5, 0] = flags[7:13, 0] = True
+    # right hand: on at steps 12-14, off 15-16 (a 2-step gap: chatter), on 17-22, off 23-..; head never
+    flags = np.zeros((30, 2), bool)
+    flags[12:15, 0] = flags[17:23, 0] = True
     records = []
-    for first in (0, 10):  # two chunks of 10 steps shown from t0 = 100 and 100.05 (dt 0.005)
-        records.append({"first_step": first, "t0": 100.0 + first * 0.005,
+    for i, first in enumerate((0, 10, 20)):  # chunks of 10 steps shown from t0 = 100, 100.05, 100.1 (dt 0.005)
+        records.append({"chunk": i, "first_step": first, "t0": 100.0 + first * 0.005,
                         "touches": changes.update(first, flags[first:first + 10])})
-    assert records[0]["touches"] == {"right_hand": [[2, 1], [5, 0], [7, 1]]}
-    assert records[1]["touches"] == {"right_hand": [[13, 0]]}
+    assert records[0]["touches"] == {}
+    assert records[1]["touches"] == {"right_hand": [[12, 1], [15, 0], [17, 1]]}
+    assert records[2]["touches"] == {"right_hand": [[23, 0]]}
     iv, shown = shown_touches(records, 0.005, 10)
-    assert list(iv) == ["right_hand"] and shown == pytest.approx(0.1)
-    assert np.allclose([i[:2] for i in iv["right_hand"]], [(100.01, 100.025), (100.035, 100.065)])
-    assert np.allclose(touch_onsets(iv["right_hand"], 0.3), [100.01])  # the 10 ms gap is one touch
-    assert np.allclose(touch_onsets(iv["right_hand"], 0.005), [100.01, 100.035])
+    assert list(iv) == ["right_hand"] and shown == pytest.approx(0.1)  # chunk 0 was computed, never shown
+    assert np.allclose([i[:2] for i in iv["right_hand"]], [(100.06, 100.075), (100.085, 100.115)])
+    assert np.allclose(touch_onsets(iv["right_hand"], 0.3), [100.06])  # the 10 ms gap is one touch
+    assert np.allclose(touch_onsets(iv["right_hand"], 0.005), [100.06, 100.085])
 
 
-def test_a_resume_and_a_pause_between_chunks_are_not_shown_time_nor_onsets():
-    """A touch on at the first shown step, or still on when a resumed session shows its first chunk, was not
-    seen to begin; the pause before a resume (or while a voice listener loads) is not shown time; a clock that
-    goes backwards is refused."""
+def test_unshown_chunks_resumes_and_pauses_are_not_shown_time_nor_onsets():
+    """Each session process records chunks from index 0, and its chunk 0 runs before the view and the
+    feedback sources start: not shown, its touches not seen to begin. A resume (index 0 again, whether its
+    steps jump back to an autosave or continue after a clean stop) closes the touches open before it; its
+    pause is not shown time; a clock that goes backwards is refused."""
     dt, n = 0.01, 10
-    records = [{"first_step": 0, "t0": 0.0, "touches": {"head": [[0, 1], [3, 0], [6, 1]]}},  # on from step 0
-               {"first_step": 10, "t0": 0.1, "touches": {}},  # head still on at the end of this stretch
-               # resumed from the checkpoint of step 10, 60 s later: its TouchChanges starts from 'no touch'
-               {"first_step": 10, "t0": 60.1, "touches": {"head": [[10, 1], [12, 0], [15, 1], [17, 0]]}}]
+    records = [{"chunk": 0, "first_step": 0, "t0": 0.0, "touches": {"head": [[2, 1]]}},  # on before anyone watched
+               {"chunk": 1, "first_step": 10, "t0": 0.1, "touches": {"head": [[13, 0], [16, 1]]}},
+               {"chunk": 2, "first_step": 20, "t0": 0.2, "touches": {}},  # head still on at the stop
+               # a clean stop and --resume 60 s later: the steps continue, the new process starts at index 0 and
+               # its TouchChanges from 'no touch' (head on again at once, unseen), then a chunk with an onset
+               {"chunk": 0, "first_step": 30, "t0": 60.3, "touches": {"head": [[30, 1], [32, 0]]}},
+               {"chunk": 1, "first_step": 40, "t0": 60.4, "touches": {"head": [[45, 1], [47, 0]]}}]
     iv, shown = shown_touches(records, dt, n)
-    assert shown == pytest.approx(0.3)  # three chunks of 0.1 s, not 60.2 s
+    assert shown == pytest.approx(0.3)  # chunks 1, 2 and the resumed 1: not the unshown chunks 0, not the pause
     assert [(round(a, 3), round(b, 3), began) for a, b, began in iv["head"]] == [
-        (0.0, 0.03, False), (0.06, 0.2, True), (60.1, 60.12, False), (60.15, 60.17, True)]
-    assert np.allclose(touch_onsets(iv["head"], 0.02), [0.06, 60.15])
+        (0.02, 0.13, False), (0.16, 0.3, True), (60.3, 60.32, False), (60.45, 60.47, True)]
+    assert np.allclose(touch_onsets(iv["head"], 0.02), [0.16, 60.45])
     with pytest.raises(ValueError, match="clock goes backwards"):
-        shown_touches(records + [{"first_step": 30, "t0": 5.0, "touches": {}}], dt, n)
+        shown_touches(records + [{"chunk": 0, "first_step": 50, "t0": 5.0, "touches": {}}], dt, n)
 
 
 def test_our_simulated_teacher_as_the_person_gives_back_its_channel_delay():

@@ -166,6 +166,24 @@ def _serve_in_thread(app):
     return f"http://127.0.0.1:{box['port']}", stop
 
 
+def test_a_calibration_sessions_snapshot_carries_its_task_into_the_pages_status():
+    """The path the prompt takes without a browser: the session's snapshot of a chunk, the view process's
+    Player, the status message the page receives."""
+    from types import SimpleNamespace
+
+    from mjx_protamer.commands.finetune_view import calibration_prompt, snapshot
+    from mjx_protamer.view.playback import Player
+
+    run = SimpleNamespace(last_chunk={"first_step": 50, "obs": np.zeros((5, 3)), "action": np.zeros((5, 2))},
+                          events=3, corrections=2, learner=SimpleNamespace(updates=7), use_model=False)
+    metrics = {"contact_rate": 1.0, "step_reward": 0.5}
+    for calibrate, expected in (("head", calibration_prompt("head")), (None, None)):
+        args = SimpleNamespace(learner="coach", feedback="keyboard", calibrate=calibrate)
+        player = Player(scene_factory=None)
+        player.submit(snapshot(run, args, metrics, 100.0, 0.005, None))
+        assert player.status_message().get("prompt") == expected
+
+
 def test_a_calibration_session_shows_its_task_on_the_page_and_an_ordinary_one_does_not():
     """`finetune --calibrate head` puts its prompt in the status; the page shows it above the picture, where a
     person looks, and shows nothing there for an ordinary session."""
