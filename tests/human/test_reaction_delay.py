@@ -200,8 +200,16 @@ def test_the_command_explains_what_is_missing(tmp_path, capsys):
     SessionRecorder(bad, {}).close()  # a manifest without the feedback config
     assert main(["reaction-delay", str(bad)]) == 2
     assert "cannot read the session record (KeyError" in capsys.readouterr().err
-    empty = tmp_path / "toy"
+    empty = tmp_path / "loading"
     empty.mkdir()
     SessionRecorder(empty, {"feedback": "keyboard", "chunk_steps": 10, "feedback_config": {"dt": 0.01}}).close()
     assert main(["reaction-delay", str(empty)]) == 2
+    assert "showed no chunk (stopped while loading)" in capsys.readouterr().err
+    toy = tmp_path / "toy"
+    toy.mkdir()
+    rec = SessionRecorder(toy, {"feedback": "keyboard", "chunk_steps": 10, "feedback_config": {"dt": 0.01}})
+    for i in range(3):
+        rec.chunk(i, 10 * i, 0.1 * i, [], {})  # an env without regions records no touches
+    rec.close()
+    assert main(["reaction-delay", str(toy)]) == 2
     assert "recorded no touches" in capsys.readouterr().err
