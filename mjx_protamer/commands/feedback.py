@@ -577,14 +577,14 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
             _save(run, out, args.learner, saved_config)
             print(f"[finetune] saved {'coach policy' if args.learner == 'coach' else 'checkpoint, reward model'} "
                   f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
-    fitted = 0
+    fit_code = 0  # measure()'s exit code: 2 when the calibration's delay could not be fitted
     if args.calibrate is not None:  # the session is saved whatever the fit says
         from mjx_protamer.commands.reaction_delay import measure
 
         for old in (out / "reaction_delay.json", out / "reaction_delay.png"):  # an earlier stretch's fit
             old.unlink(missing_ok=True)
         print(f"[calibrate] the reaction delay of this session ({args.calibrate} onsets):", flush=True)
-        fitted = measure(out, args.calibrate, json_path=out / "reaction_delay.json",
+        fit_code = measure(out, args.calibrate, json_path=out / "reaction_delay.json",
                          plot_path=out / "reaction_delay.png", who="[calibrate] no fit",
                          rerun=f"protamer reaction-delay {out}")
     if stopper.signum is not None:
@@ -595,10 +595,10 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
         return max(listener.exitcode, 1)
     if interrupted:
         return 130
-    if fitted:
-        print(f"[finetune] exit code {fitted}: the session is saved, its reaction delay could not be fitted (above)",
-              flush=True)
-    return fitted
+    if fit_code:
+        print(f"[finetune] exit code {fit_code}: the session is saved, its reaction delay could not be fitted "
+              "(above)", flush=True)
+    return fit_code
 
 
 def _coach_resume_step(out: Path) -> int:
