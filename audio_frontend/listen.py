@@ -79,6 +79,7 @@ def run_listener(queue, config, scorer, source, stop_event=None, save_dir: str |
             on_event(ev, ok)
         if log is not None and config.listen.log_every_event:
             extra = ev.details.get("transcript", ev.details.get("valence"))
+            extra = round(extra, 3) if isinstance(extra, float) else extra
             print(f"[voice] {scorer.source} {ev.value:+.3f} ({extra!r}) seg {seg.duration_s:.2f}s "
                   f"latency {ev.details['latency_s']:.3f}s{'' if ok else ' NOT QUEUED'}", file=log, flush=True)
 

@@ -12,9 +12,13 @@ voice listener process feeds. Learners:
 - `ddpg` (default): the run's actor and critic go on learning with DDPG; each accepted event is credited
   to the steps shown before it and updates the DeepTAMER reward model, whose params enter the next chunk
   (reward `alpha * r_env + beta * r_hat`).
-- `coach`: Deep COACH, a Gaussian policy learned from the feedback alone, on the run's env (a fresh
-  policy, or `--coach-policy FILE` saved by an earlier session); each event corrects the window of steps
-  before it (docs/human_feedback.md).
+- `coach`: Deep COACH, a Gaussian policy learned from the feedback alone, on the run's env (its mean the
+  run's actor by default, `--coach-init scratch` a fresh policy, `--coach-policy FILE` one saved by an
+  earlier session); each event corrects the window of steps before it (docs/human_feedback.md).
+
+The session's settings: the checkpoint's networks, env and DDPG hyper-parameters; the feedback config's
+(`--config`, default configs/feedback_keyboard.yaml, and `--set`) credit, reward model and reward weights
+`pretrain.ddpg.reward_alpha` / `reward_beta`.
 
 Each chunk prints a status line; each key press is confirmed at once and each drained event is shown with
 what it credited. On exit (q, --seconds, --max-chunks, Ctrl-C) everything is saved into --out:
@@ -51,6 +55,14 @@ FEEDBACK_CHOICES = ("keyboard", "prosody", "whisper", "web", "simulated:keyboard
                     "simulated:speech", "none")
 # How long a live session waits for the voice listener to load torch and its model before going on.
 LISTENER_LOAD_TIMEOUT_S = 300.0
+# A session's feedback config without --config (the channel follows --feedback: the three shipped files differ in
+# it alone). Without it a session would run the dataclass defaults: an unbounded reward model, no silences, beta 0.1.
+DEFAULT_FEEDBACK_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "feedback_keyboard.yaml"
+# Of a feedback config's pretrain section a session takes only the reward DDPG trains on; the rest (networks,
+# env, noise) is the checkpoint's.
+SESSION_PRETRAIN_KEYS = ("pretrain.ddpg.reward_alpha", "pretrain.ddpg.reward_beta")
+# Deep COACH from a pretrained actor: the initial log std of its Gaussian policy (docs/human_feedback.md)
+COACH_ACTOR_LOG_STD = -1.0
 
 
 def register(subparsers) -> None:
@@ -68,13 +80,17 @@ def register(subparsers) -> None:
                    help="ddpg: the checkpoint's DDPG + DeepTAMER reward model; coach: Deep COACH on the same env")
     p.add_argument("--checkpoint", type=Path, default=None,
                    help="a pretrain run directory or checkpoint in it (not with --resume / --replay)")
-    p.add_argument("--config", type=Path, default=None, help="feedback YAML (configs/feedback_keyboard.yaml); "
-                   "its pretrain section is replaced by the checkpoint's")
+    p.add_argument("--config", type=Path, default=None, help="feedback YAML (default: configs/feedback_keyboard.yaml; "
+                   "the channel follows --feedback); of its pretrain section only ddpg.reward_alpha and "
+                   "ddpg.reward_beta apply, the rest is the checkpoint's")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a feedback config value, e.g. --set feedback.credit.scheme=time_window")
+                   help="override a feedback config value, e.g. --set feedback.credit.scheme=time_window or "
+                   "--set pretrain.ddpg.reward_beta=0.5")
     p.add_argument("--out", type=Path, default=None, help="output directory (default: runs/finetune-<time>)")
     p.add_argument("--chunk-ms", type=float, default=250.0, help="simulated time per jitted chunk (ms)")
-    p.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: until q or Ctrl-C)")
+    p.add_argument("--seconds", type=float, default=0.0,
+                   help="stop this long after the session is ready (compiling and loading a voice model do not "
+                   "count; 0: until q or Ctrl-C)")
     p.add_argument("--max-chunks", type=int, default=0, help="stop after this many chunks (0: no limit)")
     p.add_argument("--no-pace", action="store_true",
                    help="do not pace live chunks to real time (they are shown as fast as they are computed)")
@@ -108,6 +124,12 @@ def register(subparsers) -> None:
                    help="start from a coach_policy.msgpack of an earlier finetune --learner coach")
     c.add_argument("--coach-delay-s", type=float, default=0.3,
                    help="human reaction delay: an event corrects the window ending this long before it began")
+    c.add_argument("--coach-init", choices=("actor", "scratch"), default="actor",
+                   help="actor (default): the policy's mean starts as the checkpoint's DDPG actor, so feedback "
+                   "corrects the pretrained behaviour; scratch: a fresh policy, as Deep COACH was published")
+    c.add_argument("--coach-log-std", type=float, default=None,
+                   help=f"the policy's initial log std (default {COACH_ACTOR_LOG_STD} from the actor, "
+                   "-0.5 from scratch): its exploration is the direction each correction takes")
     p.set_defaults(handler=_finetune)
 
 
@@ -193,6 +215,10 @@ def _finetune(args: argparse.Namespace) -> int:
         args.checkpoint = _resume_source(args)
     elif args.checkpoint is None:
         return _fail("--checkpoint is required (a pretrain run directory), unless --resume or --replay")
+    else:
+        problem = _session_config_problem(args)  # before the checkpoint's minutes of loading
+        if problem:
+            return _fail(problem)
     live = args.feedback in LIVE
     from mjx_protamer.commands.finetune_view import default_view
     if args.feedback == "web" and (args.view or default_view()) != "web":
@@ -254,6 +280,28 @@ def _finetune(args: argparse.Namespace) -> int:
     elif _recorded_backend(args.out):  # the env the session recorded (COACH resumes from the pretrain config)
         loaded = _live_env(*loaded, _recorded_backend(args.out))
     return _session(args, live, voice, *loaded)
+
+
+def _session_config_problem(args) -> str | None:
+    """A new session's feedback config, checked before anything heavy: the default file when --config is not
+    given (set on `args`), --set keys the session would drop, and what the config cannot run with. A bad key or
+    value raises ConfigError (one line, exit 2)."""
+    from mjx_protamer.human.tamer_loop import load_feedback_config
+
+    if args.config is None and DEFAULT_FEEDBACK_CONFIG.is_file():
+        args.config = DEFAULT_FEEDBACK_CONFIG
+    for o in args.overrides:
+        key = o.split("=", 1)[0].strip()
+        if key.startswith("pretrain") and key not in SESSION_PRETRAIN_KEYS:
+            return (f"--set {key}: a session takes its pretraining settings from the checkpoint; of the pretrain "
+                    f"section only {' and '.join(SESSION_PRETRAIN_KEYS)} apply")
+    if args.config is not None and not Path(args.config).is_file():
+        return f"--config {args.config}: no such file (a feedback YAML such as configs/feedback_keyboard.yaml)"
+    fb = _with_feedback_channel(load_feedback_config(args.config, args.overrides).feedback, args.feedback)
+    if fb.credit.silence_needs_attention and args.feedback.startswith("simulated:") and args.learner == "ddpg":
+        return ("feedback.credit.silence_needs_attention: the host's simulated teachers report no attention; set "
+                "it false here (the in-jit teachers of pretrain/reproduce and a live session's page do)")
+    return None
 
 
 def _env_name(run_dir: Path) -> str:
@@ -344,6 +392,7 @@ def _resume_source(args) -> Path:
         from mjx_protamer.config import ConfigError
         raise ConfigError(f"--resume: the session in {args.out} used --learner {manifest['learner']}")
     if args.learner == "coach":
+        _coach_args_from(manifest, args)
         if (args.out / "coach_policy.msgpack").is_file():
             args.coach_policy = args.out / "coach_policy.msgpack"
         return Path(manifest["checkpoint"])
@@ -354,26 +403,44 @@ def _resume_source(args) -> Path:
     return args.out
 
 
+def _coach_args_from(manifest: dict, args) -> None:
+    """A recorded COACH session's policy settings (sessions recorded before --coach-init started from scratch)."""
+    args.coach_delay_s = manifest["coach_delay_s"]
+    args.coach_init = manifest.get("coach_init") or "scratch"
+    args.coach_log_std = manifest.get("coach_log_std")
+
+
 # --------------------------------------------------------------------------- the run
 
-def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, feedback_mode, queue=None):
+def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, feedback_mode, queue=None,
+               weights: tuple[float, float] | None = None):
     """The learner of a session (TamerRun or CoachRun) on the loaded checkpoint; `feedback_mode` is what
-    the run is told (None, "queue" or "simulated:KIND"). Returns (run, saved_config)."""
+    the run is told (None, "queue" or "simulated:KIND"); `weights` (alpha, beta) of DDPG's reward
+    `alpha r_env + beta r_hat`, the session's (None: the checkpoint's). Returns (run, saved_config)."""
     import dataclasses
 
     if args.learner == "coach":
         from mjx_protamer.agents.coach import CoachConfig
         from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
 
-        ccfg = CoachRunConfig(coach=CoachConfig(human_delay_steps=round(args.coach_delay_s / fb.dt)),
-                              chunk_steps=chunk_steps, episode_length=pre.train.episode_length, dt=fb.dt,
+        from_actor = args.coach_init == "actor"
+        coach = CoachConfig(human_delay_steps=round(args.coach_delay_s / fb.dt))
+        if from_actor:
+            coach = dataclasses.replace(coach, hidden=tuple(pre.ddpg.actor_hidden), activation="relu",
+                                        init_log_std=COACH_ACTOR_LOG_STD)
+        if args.coach_log_std is not None:
+            coach = dataclasses.replace(coach, init_log_std=float(args.coach_log_std))
+        ccfg = CoachRunConfig(coach=coach, chunk_steps=chunk_steps, episode_length=pre.train.episode_length, dt=fb.dt,
                               queue_size=fb.queue_size, min_interval_steps=fb.credit.min_interval_steps,
                               seed=fb.seed)
         run = CoachRun(ccfg, env, feedback=None if feedback_mode in (None, "queue") else feedback_mode,
                        queue=queue, log_path=out / "feedback.jsonl", teacher=fb.teacher)
         if args.coach_policy is not None:
             run.load_policy(args.coach_policy)
-        return run, {"coach": dataclasses.asdict(ccfg), "pretrain_run": str(args.checkpoint)}
+        elif from_actor:
+            run.start_from_actor(loaded.actor_params)
+        return run, {"coach": dataclasses.asdict(ccfg), "pretrain_run": str(args.checkpoint),
+                     "coach_init": args.coach_init}
     from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
 
     train = dataclasses.replace(pre.train, num_envs=1, chunk_steps=chunk_steps, warmup_env_steps=0,
@@ -381,6 +448,8 @@ def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, fe
     # a session is open-ended: the full step size, whatever decay the pretraining run's budget had
     ddpg = dataclasses.replace(pre.ddpg, replay_size=max(pre.ddpg.batch_size, 20_000, chunk_steps),
                                lr_final_fraction=1.0)
+    if weights is not None:  # a pretraining run without feedback never used its beta (0.1 by default)
+        ddpg = dataclasses.replace(ddpg, reward_alpha=float(weights[0]), reward_beta=float(weights[1]))
     config = FeedbackRunConfig(pretrain=dataclasses.replace(pre, train=train, ddpg=ddpg),
                                feedback=dataclasses.replace(fb, watch_env=0, reward_model=dataclasses.replace(
                                    fb.reward_model, lr_final_fraction=1.0)))
@@ -423,7 +492,10 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
         chunk_ms = manifest["chunk_ms"]
     else:
         overrides, config_path, chunk_ms = args.overrides, args.config, args.chunk_ms
-    fb = _with_feedback_channel(load_feedback_config(config_path, overrides).feedback, args.feedback)
+    session_cfg = load_feedback_config(config_path, overrides)
+    fb = _with_feedback_channel(session_cfg.feedback, args.feedback)
+    # resumed: the session's own config.yaml (loaded as the checkpoint) holds the weights it ran with
+    weights = None if resume else (session_cfg.pretrain.ddpg.reward_alpha, session_cfg.pretrain.ddpg.reward_beta)
     chunk_steps = max(1, round(chunk_ms / 1000.0 / fb.dt))
     out = args.out or Path("runs") / time.strftime("finetune-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
@@ -432,7 +504,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
     mode = None if args.feedback == "none" else ("queue" if live else sim)
     if args.learner == "coach":
         mode = sim
-    run, saved_config = _build_run(args, pre, env, loaded, step, fb, chunk_steps, out, mode)
+    run, saved_config = _build_run(args, pre, env, loaded, step, fb, chunk_steps, out, mode, weights=weights)
     if resume:
         manifest.setdefault("resumed", []).append({"at_step": int(step), "time": time.time()})
         run.first_step = int(step) if args.learner == "ddpg" else _coach_resume_step(out)
@@ -441,11 +513,14 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     "chunk_steps": chunk_steps, "config": str(args.config) if args.config else None,
                     "overrides": list(args.overrides), "coach_delay_s": args.coach_delay_s,
                     "coach_policy": str(args.coach_policy) if args.coach_policy else None,
+                    "coach_init": args.coach_init if args.learner == "coach" else None,
+                    "coach_log_std": args.coach_log_std if args.learner == "coach" else None,
                     "seeds": {"train": pre.train.seed, "feedback": fb.seed},
                     "feedback_config": to_dict(fb), "listen_source": args.listen_source,
                     "segments": str(args.save_segments or (out / "segments")) if voice is not None else None,
                     "env_backend": pre.env.backend if pre.env_name == "self_touch" else None,
                     "calibrate": args.calibrate,
+                    "reward_weights": list(weights) if args.learner == "ddpg" else None,
                     "started": time.time(), **_checkpoint_identity(Path(args.checkpoint), step)}
     if getattr(run, "attention", None) is not None:
         print("[finetune] credit.silence_needs_attention: a silent step teaches 'nothing to say' only while the "
@@ -469,8 +544,12 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
             print(f"[finetune] {args.learner} from {args.checkpoint} (step {step}); chunks of {chunk_steps} steps "
                   f"({chunk_steps * fb.dt * 1000:.0f} ms); feedback {args.feedback}; output {out}"
                   + (f"; resumed at step {run.first_step}" if resume else ""), flush=True)
+            if args.learner == "ddpg" and args.feedback != "none":
+                d = run.config.pretrain.ddpg
+                print(f"[finetune] DDPG trains on {d.reward_alpha:g} r_env + {d.reward_beta:g} r_hat; feedback config "
+                      f"{config_path or 'the built-in defaults'}", flush=True)
             _warm_up(run, args.learner)
-            t_end = time.time() + args.seconds if args.seconds > 0 else float("inf")
+            t_end = float("inf")  # --seconds counts from the first chunk shown: compiles and model loads do not
             chunks = 0
             slow_said = False
             last_save = time.time()
@@ -517,6 +596,8 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     if args.calibrate is not None:
                         print(f"[calibrate] {calibration_prompt(args.calibrate)}; at the end your reaction "
                               "delay is fitted", flush=True)
+                    if args.seconds > 0:
+                        t_end = time.time() + args.seconds
                 if args.autosave_s > 0 and time.time() - last_save >= args.autosave_s:
                     t_save = time.time()
                     _save(run, out, args.learner, saved_config, final=False)

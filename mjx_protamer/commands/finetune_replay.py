@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mjx_protamer.commands.feedback import _build_run, _fail, _live_env, _load, _save, _with_feedback_channel
+from mjx_protamer.commands.feedback import (_build_run, _coach_args_from, _fail, _live_env, _load, _save,
+                                           _with_feedback_channel)
 
 
 def replay(args) -> int:
@@ -37,7 +38,7 @@ def replay(args) -> int:
                      f"(SHA-256 differs); a replay needs the very same checkpoint")
     args.learner = manifest["learner"]
     args.checkpoint = step_dir
-    args.coach_delay_s = manifest["coach_delay_s"]
+    _coach_args_from(manifest, args)
     args.coach_policy = Path(manifest["coach_policy"]) if manifest["coach_policy"] else None
     args.resume = False
     chunks = [r for r in records if "chunk" in r]
@@ -53,8 +54,9 @@ def replay(args) -> int:
                                 manifest["feedback"])
     args.out.mkdir(parents=True, exist_ok=True)
     mode = None if manifest["feedback"] == "none" else "queue"
+    weights = manifest.get("reward_weights")  # None: recorded before sessions had their own (the checkpoint's)
     run, saved_config = _build_run(args, pre, env, loaded, step, fb, manifest["chunk_steps"], args.out, mode,
-                                   queue=ScriptedQueue(drains))
+                                   queue=ScriptedQueue(drains), weights=tuple(weights) if weights else None)
     print(f"[replay] {manifest['learner']} session of {len(chunks)} chunks, "
           f"{sum(len(d) for d in drains)} events, from {step_dir}", flush=True)
     for r in chunks:

@@ -80,6 +80,11 @@ def measure(session: Path, touch: str | None, sign: str = "any", window_s=None, 
     if not intervals:
         return fail(f"{session} recorded no touches: a session of an env without body regions (the toy), "
                      "or one recorded before sessions logged touches; record a self-touch session")
+    from mjx_protamer.envs.body import REGIONS
+    from mjx_protamer.human.touches import HANDS
+
+    if touch not in (*REGIONS, *HANDS):
+        return fail(f"--touch {touch!r}: not a touch; use one of " + ", ".join((*REGIONS, *HANDS)))
     if touch not in intervals:
         return fail(f"--touch {touch!r} never happened in {session}; it recorded: "
                      + ", ".join(sorted(intervals)))
@@ -87,9 +92,13 @@ def measure(session: Path, touch: str | None, sign: str = "any", window_s=None, 
     try:
         fit = rd.fit_reaction_delay(onsets, responses, span, window)
     except rd.NotEnoughReactions as e:
-        return fail(f"{e}. Give feedback each time {touch} starts touching, for 2-3 minutes, or count a "
-                     f"touch's beginning differently ({rerun + ' ' if rerun else ''}--min-gap-s, now {min_gap:g}; "
-                     f"--sign {sign}; --window-s {window[0]:g} {window[1]:g})")
+        simulated = str(manifest.get("feedback", "")).startswith("simulated:")
+        why = (f"a simulated teacher reacts to its own rule, not to {touch}'s onsets (docs/experiments.md, "
+               f"'Measuring a reaction delay from a session', shows a rule that does)" if simulated else
+               f"give feedback each time {touch} starts touching, for 2-3 minutes")
+        return fail(f"{e}. {why[0].upper() + why[1:]}; or count a touch's beginning differently with "
+                    f"{rerun + ' ' if rerun else ''}--min-gap-s (now {min_gap:g}), --sign (now {sign}) or "
+                    f"--window-s (now {window[0]:g} {window[1]:g})")
     channel = manifest.get("feedback_config", {}).get("teacher", {}).get("channel", {})
     result = {"session": str(session), "feedback": manifest.get("feedback"), "touch": touch,
               "sign": sign, "min_gap_s": min_gap, "session_s": span, **fit.to_dict(),

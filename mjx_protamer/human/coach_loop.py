@@ -29,6 +29,7 @@ import numpy as np
 
 from mjx_protamer.agents.coach import CoachConfig, CoachLearner
 from mjx_protamer.agents.coach.networks import log_prob
+from mjx_protamer.config import ConfigError
 from mjx_protamer.human.attention import describe, is_attention
 from mjx_protamer.human.clock import StepClock, VirtualClock
 from mjx_protamer.human.queue import FeedbackLog, FeedbackQueue
@@ -179,7 +180,35 @@ class CoachRun:
     def load_policy(self, path: str | Path) -> None:
         from flax import serialization
 
-        self.learner.params = serialization.from_bytes(self.learner.params, Path(path).read_bytes())
+        def shapes(tree):
+            return jax.tree.structure(tree), [np.shape(x) for x in jax.tree.leaves(tree)]
+
+        try:
+            params = serialization.from_bytes(self.learner.params, Path(path).read_bytes())
+            fits = shapes(params) == shapes(self.learner.params)
+        except (ValueError, KeyError, TypeError):
+            fits = False
+        if not fits:
+            raise ConfigError(f"{path} is not a COACH policy of this shape ({self.config.coach.activation} layers "
+                              f"{tuple(self.config.coach.hidden)}); was it saved by a session with another "
+                              f"--coach-init?")
+        self.learner.params = params
+        self.learner.opt_state = self.learner.optimizer.init(self.learner.params)
+        self._commit()
+
+    def start_from_actor(self, actor_params) -> None:
+        """The policy's mean becomes a DDPG actor's (same layers: relu hidden, tanh output); the log std stays
+        the config's. A fine-tuning session then corrects the pretrained behaviour instead of a random one."""
+        mine = dict(self.learner.params["params"])
+        theirs = actor_params["params"]
+        dense = sorted(k for k in mine if k.startswith("Dense_"))
+        shapes = lambda tree: [tuple(tree[k]["kernel"].shape) for k in sorted(k for k in tree if k.startswith("Dense_"))]
+        if self.config.coach.activation != "relu" or shapes(mine) != shapes(theirs):
+            raise ConfigError(f"the actor's layers {shapes(theirs)} do not fit the COACH policy's {shapes(mine)} "
+                              f"({self.config.coach.activation}); build it with the actor's hidden sizes and relu")
+        for k in dense:
+            mine[k] = jax.tree.map(jnp.asarray, theirs[k])
+        self.learner.params = {"params": mine}
         self.learner.opt_state = self.learner.optimizer.init(self.learner.params)
         self._commit()
 

@@ -281,6 +281,59 @@ def test_finetune_coach_learner_saves_a_policy_that_loads(toy_run, tmp_path, cap
                     "--coach-policy", tmp_path / "missing.msgpack") == 2
 
 
+def test_finetune_coach_starts_from_the_checkpoints_actor(toy_run, tmp_path):
+    """By default COACH's mean is the pretrained actor (feedback corrects the pretrained behaviour, not a random
+    one); a policy saved that way is refused, with the reason, by a session built from scratch."""
+    import jax
+    import jax.numpy as jnp
+    from flax import serialization
+
+    from mjx_protamer.agents.coach.networks import GaussianPolicy
+    from mjx_protamer.agents.ddpg.networks import Actor
+    from mjx_protamer.experiments.run_loader import load_run
+
+    out = tmp_path / "coach"
+    assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run, "--out", out,
+                    "--max-chunks", "1") == 0
+    pre, env, state, _ = load_run(Path(toy_run))
+    hidden = tuple(pre.ddpg.actor_hidden)
+    policy = GaussianPolicy(env.action_size, hidden, -1.0, "relu")
+    template = policy.init(jax.random.PRNGKey(0), jnp.zeros((1, env.observation_size)))
+    params = serialization.from_bytes(template, (out / "coach_policy.msgpack").read_bytes())
+    obs = np.random.default_rng(0).normal(size=(32, env.observation_size)).astype(np.float32)
+    mean, log_std = policy.apply(params, obs)
+    actor = Actor(env.action_size, hidden).apply(state.actor_params, obs)
+    np.testing.assert_allclose(np.asarray(mean), np.asarray(actor), atol=1e-6)
+    assert float(np.abs(np.asarray(actor)).mean()) > 1e-3  # a trained actor, not zeros
+    np.testing.assert_allclose(np.asarray(log_std), -1.0)
+    assert run_main("--learner", "coach", "--coach-init", "scratch", "--feedback", "none", "--checkpoint", toy_run,
+                    "--out", tmp_path / "scratch", "--max-chunks", "1",
+                    "--coach-policy", out / "coach_policy.msgpack") == 2
+
+
+def test_finetune_takes_the_reward_weights_and_reward_model_from_the_session_config(toy_run, tmp_path, capsys):
+    """Without --config a session runs configs/feedback_keyboard.yaml: beta 1 (not the pretraining run's unused
+    0.1) and a bounded reward model; --set changes beta; other pretrain keys and bad keys are refused before
+    the checkpoint is loaded."""
+    import yaml
+
+    out = tmp_path / "weights"
+    assert run_main("--feedback", "none", "--checkpoint", toy_run, "--out", out, "--max-chunks", "1") == 0
+    assert yaml.safe_load((out / "config.yaml").read_text())["ddpg"]["reward_beta"] == 1.0
+    assert yaml.safe_load((out / "feedback_config.yaml").read_text())["reward_model"]["bounded"] is True
+    assert json.loads((out / "session.json").read_text())["reward_weights"] == [1.0, 1.0]
+    out2 = tmp_path / "half"
+    assert run_main("--feedback", "none", "--checkpoint", toy_run, "--out", out2, "--max-chunks", "1",
+                    "--set", "pretrain.ddpg.reward_beta=0.5") == 0
+    assert yaml.safe_load((out2 / "config.yaml").read_text())["ddpg"]["reward_beta"] == 0.5
+    capsys.readouterr()
+    for bad in ("pretrain.ddpg.actor_lr=0.1", "feedback.credit.schme=x"):
+        code = run_main("--feedback", "none", "--checkpoint", toy_run, "--out", tmp_path / "bad",
+                        "--max-chunks", "1", "--set", bad)
+        assert code == 2, bad
+        assert "loading" not in capsys.readouterr().out, bad  # refused before the checkpoint was loaded
+
+
 # ---------------------------------------------------------------- voice: the listener process feeds the same queue
 
 def _speech_wav(path: Path) -> Path:

@@ -190,6 +190,8 @@ def test_the_command_explains_what_is_missing(tmp_path, capsys):
     _record_session(tmp_path / "s", [400, 1000], [1002.4, 1005.4])
     assert main(["reaction-delay", str(tmp_path / "s"), "--touch", "head"]) == 2
     assert "never happened" in capsys.readouterr().err
+    assert main(["reaction-delay", str(tmp_path / "s"), "--touch", "nose"]) == 2
+    assert "--touch 'nose': not a touch; use one of hip" in capsys.readouterr().err
     assert main(["reaction-delay", str(tmp_path / "s"), "--touch", "right_hand"]) == 2
     err = capsys.readouterr().err
     assert "only 2 of 2 feedback events" in err and "Give feedback each time right_hand starts touching" in err

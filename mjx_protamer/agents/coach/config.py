@@ -20,6 +20,7 @@ class CoachConfig:
     replay_size: int = 1000  # windows
     batch_windows: int = 16  # windows per minibatch (16-32 in the paper); the newest is always included
     updates_per_feedback: int = 1
+    activation: str = "tanh"  # hidden layers; "relu" to start from a DDPG actor (finetune --coach-init actor)
 
     def validate(self) -> None:
         check(len(self.hidden) >= 1 and min(self.hidden) > 0, "hidden", f"needs positive widths, got {self.hidden}")
@@ -31,3 +32,4 @@ class CoachConfig:
         check(self.replay_size >= self.batch_windows, "replay_size",
               f"must be >= batch_windows ({self.batch_windows}), got {self.replay_size}")
         check(self.batch_windows >= 1, "batch_windows", f"must be >= 1, got {self.batch_windows}")
+        check(self.activation in ("tanh", "relu"), "activation", f"must be tanh or relu, got {self.activation!r}")

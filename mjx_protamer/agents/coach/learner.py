@@ -32,7 +32,7 @@ class CoachLearner:
     def __init__(self, config: CoachConfig, obs_size: int, action_size: int, seed: int = 0, history: int = 4096):
         self.config = config
         self.obs_size, self.action_size = obs_size, action_size
-        self.policy = GaussianPolicy(action_size, tuple(config.hidden), config.init_log_std)
+        self.policy = GaussianPolicy(action_size, tuple(config.hidden), config.init_log_std, config.activation)
         self.params = self.policy.init(jax.random.PRNGKey(seed), jnp.zeros((1, obs_size)))
         self.optimizer = optax.adam(config.learning_rate)
         self.opt_state = self.optimizer.init(self.params)
