@@ -102,6 +102,9 @@ def register(subparsers) -> None:
     w.add_argument("--autosave-s", type=float, default=30.0,
                    help="save checkpoint, reward model and configs atomically this often (s; 0: only at exit)")
     w.add_argument("--resume", action="store_true", help="continue the session in --out (after a crash or stop)")
+    w.add_argument("--fresh-replay", action="store_true",
+                   help="start DDPG's replay empty instead of with the checkpoint's experience (sessions before "
+                   "5 December did; the policy then moves within seconds whatever the feedback)")
     w.add_argument("--calibrate", default=None, metavar="TOUCH",
                    help="measure your reaction delay: give feedback each time TOUCH begins (head, a body region, "
                    "left_hand or right_hand); at the end the session's delay is fitted (`protamer reaction-delay`) "
@@ -445,9 +448,13 @@ def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, fe
 
     train = dataclasses.replace(pre.train, num_envs=1, chunk_steps=chunk_steps, warmup_env_steps=0,
                                 total_env_steps=max(pre.train.total_env_steps, chunk_steps), num_devices=1)
+    # The pretraining run's experience seeds the replay: DDPG's first updates in a session would otherwise
+    # fit the few dozen transitions of its first chunk and move the policy within seconds, feedback or not
+    # (docs/human_feedback.md). A resumed session has its own replay.
+    carry = not args.resume and not getattr(args, "fresh_replay", False)
+    replay_size = int(loaded.replay.capacity) if args.resume else max(pre.ddpg.batch_size, 20_000, chunk_steps)
     # a session is open-ended: the full step size, whatever decay the pretraining run's budget had
-    ddpg = dataclasses.replace(pre.ddpg, replay_size=max(pre.ddpg.batch_size, 20_000, chunk_steps),
-                               lr_final_fraction=1.0)
+    ddpg = dataclasses.replace(pre.ddpg, replay_size=replay_size, lr_final_fraction=1.0)
     if weights is not None:  # a pretraining run without feedback never used its beta (0.1 by default)
         ddpg = dataclasses.replace(ddpg, reward_alpha=float(weights[0]), reward_beta=float(weights[1]))
     config = FeedbackRunConfig(pretrain=dataclasses.replace(pre, train=train, ddpg=ddpg),
@@ -458,10 +465,14 @@ def _build_run(args, pre, env, loaded, step, fb, chunk_steps: int, out: Path, fe
         run.state = loaded
         if (out / "reward_model.msgpack").is_file():
             run.model.load(out / "reward_model.msgpack")
-    else:  # the pretrained learner on a fresh single-env state (env batch, noise and replay are new)
+    else:  # the pretrained learner on a fresh single-env state (env batch and noise are new)
+        from mjx_protamer.agents.ddpg.replay import newest
+
         run.state = run.state.replace(**{k: getattr(loaded, k) for k in (
             "actor_params", "critic_params", "target_actor_params", "target_critic_params",
             "actor_opt_state", "critic_opt_state")})
+        if carry:
+            run.state = run.state.replace(replay=newest(loaded.replay, replay_size))
     run.commit_state()  # restored arrays are uncommitted: the second chunk would compile again
     return run, None
 
@@ -521,6 +532,7 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                     "env_backend": pre.env.backend if pre.env_name == "self_touch" else None,
                     "calibrate": args.calibrate,
                     "reward_weights": list(weights) if args.learner == "ddpg" else None,
+                    "replay_from_checkpoint": args.learner == "ddpg" and not args.fresh_replay,
                     "started": time.time(), **_checkpoint_identity(Path(args.checkpoint), step)}
     if getattr(run, "attention", None) is not None:
         print("[finetune] credit.silence_needs_attention: a silent step teaches 'nothing to say' only while the "

@@ -39,6 +39,7 @@ def replay(args) -> int:
     args.learner = manifest["learner"]
     args.checkpoint = step_dir
     _coach_args_from(manifest, args)
+    args.fresh_replay = not manifest.get("replay_from_checkpoint", False)  # sessions before 5 Dec.: empty
     args.coach_policy = Path(manifest["coach_policy"]) if manifest["coach_policy"] else None
     args.resume = False
     chunks = [r for r in records if "chunk" in r]

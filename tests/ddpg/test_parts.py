@@ -81,6 +81,21 @@ def test_replay_wraps_around_and_samples_filled_rows_only():
     assert set(np.asarray(sampled.action[:, 0]).tolist()) == {5.0, 6.0, 7.0, 8.0, 9.0}
 
 
+def test_newest_keeps_the_latest_transitions_in_order_for_a_smaller_buffer():
+    """A fine-tuning session's replay starts with its pretraining run's latest experience."""
+    buf = replay.init(capacity=5, obs_size=1, action_size=1, num_terms=1)
+    for v in (jnp.arange(1, 5, dtype=jnp.float32), jnp.arange(5, 8, dtype=jnp.float32)):  # ring: 6, 7, 3, 4, 5
+        buf = replay.add(buf, replay.Transition(v[:, None], v[:, None], v[:, None], v[:, None], v))
+    small = replay.newest(buf, 3)
+    np.testing.assert_array_equal(small.data.obs[:, 0], [5, 6, 7])
+    assert int(small.size) == 3 and int(small.ptr) == 0 and small.capacity == 3
+    big = replay.newest(buf, 8)  # room for more: all 5, oldest first, the rest empty
+    np.testing.assert_array_equal(big.data.terminal, [3, 4, 5, 6, 7, 0, 0, 0])
+    assert int(big.size) == 5 and int(big.ptr) == 5
+    big = replay.add(big, replay.Transition(*(jnp.full((1, 1), 9.0),) * 4, jnp.full((1,), 9.0)))
+    assert float(big.data.obs[5, 0]) == 9.0  # new transitions follow the carried ones
+
+
 def test_ou_noise_mean_reversion_and_stationary_std():
     config = NoiseConfig(kind="ou", theta=0.15, sigma=0.6)
     steps, procs = 4000, 256

@@ -324,8 +324,15 @@ def test_finetune_takes_the_reward_weights_and_reward_model_from_the_session_con
     assert json.loads((out / "session.json").read_text())["reward_weights"] == [1.0, 1.0]
     out2 = tmp_path / "half"
     assert run_main("--feedback", "none", "--checkpoint", toy_run, "--out", out2, "--max-chunks", "1",
-                    "--set", "pretrain.ddpg.reward_beta=0.5") == 0
+                    "--set", "pretrain.ddpg.reward_beta=0.5", "--fresh-replay") == 0
     assert yaml.safe_load((out2 / "config.yaml").read_text())["ddpg"]["reward_beta"] == 0.5
+    # the replay starts with the pretraining run's latest experience (unless --fresh-replay)
+    from mjx_protamer.experiments.run_loader import load_run
+
+    pretrained = int(load_run(Path(toy_run))[2].replay.size)
+    steps = json.loads((out / "session.json").read_text())["chunk_steps"]
+    assert int(load_run(out)[2].replay.size) == min(pretrained, 20_000) + steps
+    assert int(load_run(out2)[2].replay.size) == steps
     capsys.readouterr()
     for bad in ("pretrain.ddpg.actor_lr=0.1", "feedback.credit.schme=x"):
         code = run_main("--feedback", "none", "--checkpoint", toy_run, "--out", tmp_path / "bad",

@@ -57,6 +57,16 @@ def add(buffer: ReplayBuffer, batch: Transition) -> ReplayBuffer:
     )
 
 
+def newest(buffer: ReplayBuffer, capacity: int) -> ReplayBuffer:
+    """A buffer of `capacity` rows holding the most recent min(capacity, size) transitions of `buffer`, oldest
+    first (a fine-tuning session's replay seeded with its pretraining run's latest experience)."""
+    n = min(int(buffer.size), capacity)
+    rows = (int(buffer.ptr) - n + jnp.arange(n)) % buffer.capacity
+    data = jax.tree.map(lambda store: jnp.zeros((capacity, *store.shape[1:]), store.dtype).at[:n].set(store[rows]),
+                        buffer.data)
+    return ReplayBuffer(data=data, ptr=jnp.asarray(n % capacity, jnp.int32), size=jnp.asarray(n, jnp.int32))
+
+
 def sample(buffer: ReplayBuffer, rng: jax.Array, batch_size: int) -> Transition:
     """Uniform sample with replacement from the filled rows (the buffer must hold at least one)."""
     rows = jax.random.randint(rng, (batch_size,), 0, jnp.maximum(buffer.size, 1))
