@@ -669,7 +669,8 @@ def _session(args, live: bool, voice, pre, env, loaded, step) -> int:
                 print(f"[view] closed: {view.offered} chunks offered, {view.dropped} dropped", flush=True)
             _save(run, out, args.learner, saved_config)
             print(f"[finetune] saved {'coach policy' if args.learner == 'coach' else 'checkpoint, reward model'} "
-                  f"and feedback log in {out}: {run.events} events, queue {run.queue.stats()}", flush=True)
+                  f"and feedback log in {out}: {run.events} events{' since the resume' if resume else ''}, queue "
+                  f"{run.queue.stats()}", flush=True)
     fit_code = 0  # measure()'s exit code: 2 when the calibration's delay could not be fitted
     if args.calibrate is not None:  # the session is saved whatever the fit says
         from mjx_protamer.commands.reaction_delay import measure
