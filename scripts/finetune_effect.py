@@ -27,6 +27,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 METRICS = ("teacher_score", "unique_regions", "freeze_ratio", "contact_rate")
+CHUNK_MS = 250.0  # finetune's default chunk, passed explicitly so the session length does not hang on it
 
 
 def _rule_override(rule_config) -> str:
@@ -44,7 +45,7 @@ def _session(checkpoint: Path, feedback: str, seed: int, chunks: int, out: Path,
     if (out / "session.json").is_file() and (out / "checkpoints").is_dir():
         return float("nan")
     cmd = [str(ROOT / ".venv/bin/protamer"), "finetune", "--checkpoint", str(checkpoint), "--feedback", feedback,
-           "--view", "none", "--no-pace", "--max-chunks", str(chunks), "--autosave-s", "0", "--out", str(out),
+           "--view", "none", "--no-pace", "--chunk-ms", str(CHUNK_MS), "--max-chunks", str(chunks), "--autosave-s", "0", "--out", str(out),
            "--set", rule, "--set", f"feedback.seed={seed}", *extra]
     t0 = time.perf_counter()
     with open(out.with_suffix(".log"), "w") as log:
@@ -101,15 +102,17 @@ def main(argv=None) -> int:
 
     args.out.mkdir(parents=True, exist_ok=True)
     rule = _rule_override(args.rule_config)
-    dt = 0.005
-    chunks = int(round(args.minutes * 60 / (0.25)))  # 250 ms chunks
+    chunks = int(round(args.minutes * 60 * 1000 / CHUNK_MS))
     rows = []
     for seed, ckpt in enumerate(args.checkpoints):
         extra = ["--fresh-replay"] if args.fresh_replay else []
         walls = {fb: _session(ckpt, fb, seed, chunks, args.out / f"{fb.replace(':', '_')}_{seed}", rule, extra)
                  for fb in ("none", args.feedback)}
         score, start_actor = _scorer(ckpt, args.rule_config, args.episodes)
-        row = {"seed": seed, "checkpoint": str(ckpt), "steps": chunks * 50, "shown_s": chunks * 50 * dt,
+        session = json.loads((args.out / f"{args.feedback.replace(':', '_')}_{seed}" / "session.json").read_text())
+        steps = chunks * session["chunk_steps"]
+        row = {"seed": seed, "checkpoint": str(ckpt), "steps": steps,
+               "shown_s": steps * session["feedback_config"]["dt"],
                "wall_s": walls, "start": score(start_actor)}
         for fb in ("none", args.feedback):
             row[fb] = score(load_run(args.out / f"{fb.replace(':', '_')}_{seed}")[2].actor_params)
