@@ -66,6 +66,13 @@ class DDPGConfig:
     # session is open-ended and always runs at the full rate (commands/feedback.py).
     lr_final_fraction: float = 1.0
     lr_decay_from: float = 0.5
+    # Action biasing (losses.actor_loss): the actor also climbs `human_actor_coef * r_hat(s, mu(s))` of the human
+    # reward model, beside the critic's Q (whose scale is a return: tens per unit of step reward). 0: the paper's
+    # DDPG, where r_hat reaches the policy only through `reward_beta` and the critic.
+    human_actor_coef: float = 0.0
+    # A pull of the actor toward the actor the run started from (a session: its checkpoint's), weighing
+    # `anchor_coef * |mu(s) - mu_0(s)|^2`: bounds what the intrinsic reward alone changes in a session.
+    anchor_coef: float = 0.0
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -86,6 +93,8 @@ class DDPGConfig:
         check(self.batch_size >= 1, "batch_size", f"must be >= 1, got {self.batch_size}")
         check(self.reward_alpha >= 0.0, "reward_alpha", f"must be >= 0, got {self.reward_alpha}")
         check(self.reward_beta >= 0.0, "reward_beta", f"must be >= 0, got {self.reward_beta}")
+        check(self.human_actor_coef >= 0.0, "human_actor_coef", f"must be >= 0, got {self.human_actor_coef}")
+        check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
         check(self.replay_size >= self.batch_size, "replay_size",
               f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")
 

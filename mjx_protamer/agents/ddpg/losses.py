@@ -44,17 +44,32 @@ def td_target(reward, next_q, terminal, gamma: float) -> jax.Array:
 
 
 def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.Array, preact_coef: float = 0.0,
-               preact_free: float = 0.0):
+               preact_free: float = 0.0, human: tuple | None = None, anchor: tuple | None = None):
     """Deterministic policy gradient: maximise Q(s, mu(s)), less `preact_coef * mean(max(|pre| - free, 0)^2)`
     over the pre-tanh activations.
 
     Once the actor's pre-activations grow past ~3, tanh is flat and the critic's gradient no longer moves
     the action: the policy sticks in a corner of the action box. The penalty keeps it where it can learn.
     With `preact_free` > 0 it is a wall, not a pull: actions inside |a| < tanh(free) are not biased toward 0.
+
+    `human` = (human_reward_fn, human_params, coef): action biasing (Knox & Stone 2011; CREW's continuous Deep
+    TAMER): the actor also climbs `coef * r_hat(s, mu(s))` directly. Through the critic alone, r_hat reaches the
+    policy only after the critic has bootstrapped it into Q, which a few minutes of feedback do not allow.
+    `anchor` = (anchor_params, coef): `coef * mean |mu(s) - mu_anchor(s)|^2`, a pull toward the actor a session
+    started from: what the intrinsic reward alone would change drifts no further than the pull allows.
     """
     pre = actor_apply(actor_params, obs, True)
-    q = critic_apply(critic_params, obs, jnp.tanh(pre))
-    return -jnp.mean(q) + preact_coef * jnp.mean(jnp.maximum(jnp.abs(pre) - preact_free, 0.0) ** 2)
+    action = jnp.tanh(pre)
+    loss = -jnp.mean(critic_apply(critic_params, obs, action))
+    loss = loss + preact_coef * jnp.mean(jnp.maximum(jnp.abs(pre) - preact_free, 0.0) ** 2)
+    if human is not None:
+        fn, params, coef = human
+        loss = loss - coef * jnp.mean(fn(params, obs, action))
+    if anchor is not None:
+        params, coef = anchor
+        ref = jax.lax.stop_gradient(actor_apply(params, obs))
+        loss = loss + coef * jnp.mean(jnp.sum((action - ref) ** 2, axis=-1))
+    return loss
 
 
 def soft_update(target, online, tau: float):

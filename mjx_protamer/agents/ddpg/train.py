@@ -61,6 +61,8 @@ class TrainState:
     rng: jax.Array  # replicated PRNG key; devices fold in their index where they must differ
     iteration: jax.Array  # vectorised env steps taken so far
     episode_return: jax.Array  # (num_envs,) return of each env's running episode
+    # the actor `ddpg.anchor_coef` pulls toward (None without an anchor: checkpoints of such runs hold no copy)
+    anchor_params: Any = None
 
 
 class Learner(NamedTuple):
@@ -86,6 +88,8 @@ class Trainer(NamedTuple):
     state_sharding: Any  # TrainState of NamedSharding (None when unsharded)
     num_devices: int
     state_specs: Any  # TrainState of PartitionSpec prefixes (None when unsharded)
+    # (train_state, human_params, n) -> train_state after n more updates (one device only; None when sharded)
+    extra_updates: Callable | None = None
 
 
 def _learner(ts: TrainState) -> Learner:
@@ -196,13 +200,14 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             rng=k_run,
             iteration=jnp.zeros((), jnp.int32),
             episode_return=jnp.zeros((local_envs,)),
+            anchor_params=actor_params if dc.anchor_coef > 0 else None,
         ))
 
     def _step_scale(iteration):
         """The step-size multiplier at `iteration` (`DDPGConfig.lr_final_fraction`, step_size.decay_scale)."""
         return decay_scale(iteration, tc.iterations, dc.lr_decay_from, dc.lr_final_fraction)
 
-    def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params, scale):
+    def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params, scale, anchor_params=None):
         """One DDPG update from a fresh minibatch: critic, then actor against the new critic, then targets."""
         batch = replay.sample(buffer, local_key(key), local_batch)
         reward = losses.relabel(batch, weights, dc.reward_alpha, dc.reward_beta, human_reward_fn, human_params)
@@ -214,9 +219,12 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         c_updates, critic_opt_state = critic_opt.update(pmean(c_grads), lr.critic_opt_state, lr.critic_params)
         critic_params = optax.apply_updates(lr.critic_params, jax.tree.map(lambda u: u * scale, c_updates))
 
+        bias = (human_reward_fn, human_params, dc.human_actor_coef) \
+            if human_reward_fn is not None and dc.human_actor_coef > 0 else None
+        anchor = (anchor_params, dc.anchor_coef) if anchor_params is not None and dc.anchor_coef > 0 else None
         a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(
             lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs, dc.actor_preact_coef,
-            dc.actor_preact_free)
+            dc.actor_preact_free, bias, anchor)
         a_updates, actor_opt_state = actor_opt.update(pmean(a_grads), lr.actor_opt_state, lr.actor_params)
         actor_params = optax.apply_updates(lr.actor_params, jax.tree.map(lambda u: u * scale, a_updates))
 
@@ -230,13 +238,13 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         )
         return new, jnp.stack([c_loss, a_loss, q_mean, jnp.mean(reward)])
 
-    def _updates(lr: Learner, key, buffer, human_params, scale):
+    def _updates(lr: Learner, key, buffer, human_params, scale, anchor_params):
         def body(lr, k):
-            return _update(lr, k, buffer, human_params, scale)
+            return _update(lr, k, buffer, human_params, scale, anchor_params)
         lr, stats = jax.lax.scan(body, lr, jax.random.split(key, tc.updates_per_step))
         return lr, jnp.sum(stats, axis=0), jnp.float32(tc.updates_per_step)
 
-    def _no_updates(lr: Learner, key, buffer, human_params, scale):
+    def _no_updates(lr: Learner, key, buffer, human_params, scale, anchor_params):
         return lr, jnp.zeros((4,)), jnp.float32(0.0)
 
     def _env_step(ts: TrainState, k_noise, k_random):
@@ -278,7 +286,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             learn = ts.iteration >= warmup_iterations
             lr, update_stats, n_updates = jax.lax.cond(
                 learn, _updates, _no_updates, _learner(ts), k_update, ts.replay, human_params,
-                _step_scale(ts.iteration))
+                _step_scale(ts.iteration), ts.anchor_params)
             ts = _with_learner(ts, lr)
         else:
             update_stats, n_updates = jnp.zeros((4,)), jnp.float32(0.0)
@@ -313,6 +321,18 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         ts, metrics, _, _ = _collect_chunk(ts, human_params)
         return ts, metrics
 
+    def _extra_updates(ts: TrainState, human_params, n):
+        """`n` more updates from the replay (a traced count: any n, one compile), beside the chunk's: a live
+        session spends the time a chunk is shown on them (docs/human_feedback.md, "How a session learns")."""
+        def body(_, carry):
+            lr, rng = carry
+            rng, k = jax.random.split(rng)
+            lr, _ = _update(lr, k, ts.replay, human_params, _step_scale(ts.iteration), ts.anchor_params)
+            return lr, rng
+
+        lr, rng = jax.lax.fori_loop(0, n, body, (_learner(ts), ts.rng))
+        return _strong(_with_learner(ts, lr).replace(rng=rng))
+
     def act(actor_params, obs):
         return actor.apply(actor_params, obs)
 
@@ -324,7 +344,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         return Trainer(init=jax.jit(init), train_chunk=jax.jit(_chunk, donate_argnums=0),
                        collect_chunk=jax.jit(_collect_chunk, donate_argnums=0), chunk_body=_collect_chunk,
                        train=train, act=jax.jit(act), env=venv, mesh=None, state_sharding=None, num_devices=1,
-                       state_specs=None)
+                       state_specs=None, extra_updates=jax.jit(_extra_updates, donate_argnums=0))
 
     mesh = Mesh(np.array(devices), (AXIS,))
     specs = _state_specs()
@@ -355,5 +375,5 @@ def _state_specs() -> TrainState:
         actor_opt_state=P(), critic_opt_state=P(),
         env_state=split, noise_state=split,
         replay=replay.ReplayBuffer(data=split, ptr=P(), size=P()),
-        rng=P(), iteration=P(), episode_return=split,
+        rng=P(), iteration=P(), episode_return=split, anchor_params=P(),
     )
