@@ -11,7 +11,7 @@ import importlib
 import sys
 
 from mjx_protamer.config import ConfigError
-from mjx_protamer.errors import CheckpointError, OutOfMemoryEstimate
+from mjx_protamer.errors import CheckpointError, OutOfMemoryEstimate, OutputDirError, SessionRecordError
 
 # Each module registers one or more subcommands; the order is the order shown in --help.
 COMMAND_MODULES = (
@@ -46,6 +46,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except CheckpointError as e:
         print(f"protamer: checkpoint error: {e}", file=sys.stderr)
+        return 2
+    except SessionRecordError as e:
+        print(f"protamer: session record error: {e}", file=sys.stderr)
+        return 2
+    except OutputDirError as e:
+        print(f"protamer: output directory error: {e}", file=sys.stderr)
         return 2
     except OutOfMemoryEstimate as e:
         print(f"protamer: not enough memory: {e}", file=sys.stderr)

@@ -16,3 +16,13 @@ class CheckpointDamaged(CheckpointError):
 
 class OutOfMemoryEstimate(ValueError):
     """A run would need more memory than the machine has; the message gives both and what to lower."""
+
+
+class SessionRecordError(ValueError):
+    """A live session's record (session.json, session_chunks.jsonl) cannot be used as it is; the message names
+    the file and line."""
+
+
+class OutputDirError(ValueError):
+    """An output directory cannot be used (not empty, another kind of run's, locked, not writable); the message
+    says what is there and what to give instead."""

@@ -53,7 +53,7 @@ def measure(session: Path, touch: str | None, sign: str = "any", window_s=None, 
     import math
 
     from mjx_protamer.human import reaction_delay as rd
-    from mjx_protamer.human.session_record import read_session, write_json_atomic
+    from mjx_protamer.live.record import read_session, write_json_atomic
     from mjx_protamer.human.touches import shown_touches, touch_onsets
 
     def fail(msg: str) -> int:

@@ -113,7 +113,7 @@ def _feedback_setup(spec: str, raw: dict, overrides: list[str]):
     from mjx_protamer.experiments.feedback_train import (BatchedFeedbackConfig, default_feedback_config,
                                                          parse_feedback, step_window_note)
     from mjx_protamer.experiments.pretrain import FeedbackSetup
-    from mjx_protamer.human.tamer_loop import FeedbackConfig
+    from mjx_protamer.human.feedback_config import FeedbackConfig
     from mjx_protamer.human.teachers import with_channel
 
     kind = parse_feedback(spec)

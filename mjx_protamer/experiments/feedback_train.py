@@ -355,7 +355,7 @@ def log_events(log, events: dict, kind: str, feedback, dt: float) -> int:
 
 def default_feedback_config(kind: str):
     """The feedback section of configs/feedback_<kind>.yaml: credit over the channel's delay distribution."""
-    from mjx_protamer.human.tamer_loop import FeedbackConfig
+    from mjx_protamer.human.feedback_config import FeedbackConfig
 
     base = FeedbackConfig()
     return dataclasses.replace(base, credit=dataclasses.replace(base.credit, scheme="channel", silence_weight=0.03),

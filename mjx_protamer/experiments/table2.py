@@ -45,7 +45,7 @@ from mjx_protamer.experiments.evaluate import validation_seed
 from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, human_reward, make_feedback_train
 from mjx_protamer.experiments.run_log import flatten
 from mjx_protamer.experiments.runner import run_chunks
-from mjx_protamer.human.tamer_loop import FeedbackConfig
+from mjx_protamer.human.feedback_config import FeedbackConfig
 
 # Paper Table II (means over 10 test episodes).
 PAPER = {

@@ -79,20 +79,21 @@ def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int
 
 def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRing", fresh_rows, key,
                          n_fresh: int, n_replay: int, batch_size: int, replay_min_rows: int,
-                         balance_max: float | None = None, scale=1.0):
+                         balance_max: float | None = None, scale=1.0, fresh_count=None):
     """`n_fresh` minibatch steps on the newly credited rows (drawn among those with weight > 0: Deep TAMER
     updates on every feedback), then `n_replay` on uniform draws from the feedback ring (none until it holds
     `replay_min_rows`). A step whose minibatch has no weight leaves params and optimiser state unchanged.
     With `balance_max`, praise and reproach weigh the same (`reward_model.sign_factors` over the ring).
-    `scale` multiplies every update (the run's step-size decay, step_size.decay_scale).
-    Returns (params, opt_state, losses (n,), live (n,))."""
+    `scale` multiplies every update (the run's step-size decay, step_size.decay_scale). `fresh_count` (traced,
+    <= n_fresh): only that many of the fresh steps are taken (a live session's events per chunk vary; one
+    compile). Returns (params, opt_state, losses (n,), live (n,))."""
     obs, action, weight, target = fresh_rows
     min_rows = min(replay_min_rows, ring.obs.shape[0])
     factors = (1.0, 1.0) if balance_max is None else sign_factors(jnp, ring.weight, ring.target, balance_max)
 
     def step(carry, xs):
         p, o = carry
-        k, fresh = xs
+        k, fresh, on = xs
         kf, kr = jax.random.split(k)
         fi = jax.random.categorical(kf, jnp.where(weight > 0, 0.0, -1e30), shape=(batch_size,))
         ri = jax.random.randint(kr, (batch_size,), 0, jnp.maximum(ring.size, 1))
@@ -103,7 +104,7 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
         bw = balanced_weight(jnp, factors, bw, bh)
         loss, g = jax.value_and_grad(weighted_loss)(p, apply, bo, ba, bw, bh)
         u, new_o = optimizer.update(g, o, p)
-        live = jnp.sum(bw) > 0
+        live = (jnp.sum(bw) > 0) & on
         u = jax.tree.map(lambda x: x * scale, u)
         p = jax.tree.map(lambda a, b: jnp.where(live, a, b), optax.apply_updates(p, u), p)
         o = jax.tree.map(lambda a, b: jnp.where(live, a, b), new_o, o)
@@ -111,7 +112,9 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
 
     n = max(n_fresh + n_replay, 1)
     fresh = jnp.arange(n) < max(n_fresh, n - n_replay)
-    (params, opt_state), (losses, live) = jax.lax.scan(step, (params, opt_state), (jax.random.split(key, n), fresh))
+    on = jnp.ones((n,), bool) if fresh_count is None else (jnp.arange(n) >= n_fresh) | (jnp.arange(n) < fresh_count)
+    (params, opt_state), (losses, live) = jax.lax.scan(step, (params, opt_state),
+                                                        (jax.random.split(key, n), fresh, on))
     return params, opt_state, losses, live
 
 

@@ -5,13 +5,13 @@
   several such MLPs and r_hat = their mean - `pessimism` x their spread.
 - Loss: weighted squared error `sum_i w_i (r_hat(s_i, a_i) - h_i)^2 / sum_i w_i`, with w the credit
   weight of the step (`credit.py`) and h the feedback value.
-- Feedback replay buffer (host NumPy ring, 1e4 rows): each credited step is one row (obs, action, w, h).
-- Updates: one step on the newly credited rows when feedback arrives (`add`), plus a replay minibatch of
-  64 uniformly drawn rows every `replay_every` env steps (`maybe_replay`), as in Deep TAMER.
+- Feedback replay (`batched.FeedbackRing`, 1e4 rows in device memory) and updates
+  (`batched.reward_model_updates`): minibatch steps on the newly credited rows, plus replay minibatches of
+  64 uniformly drawn rows, as in Deep TAMER. The batched runs (experiments/feedback_train.py) and a live
+  session (live/reward_model.py, a batch of one) call the same jitted pieces.
 - Params enter jitted code as an argument: `reward_fn(hidden)` is a pure `(params, obs, action) -> (B,)`,
   the `human_reward_fn` of `agents.ddpg.make_train`; an update changes values, never shapes or dtypes, so
-  the DDPG chunk never recompiles. Every update runs through one jitted function of one shape (batches
-  are padded with zero-weight rows or resampled), so the model compiles once.
+  the DDPG chunk never recompiles.
 """
 
 from __future__ import annotations
@@ -23,9 +23,6 @@ from typing import Callable, NamedTuple, Sequence
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
-import numpy as np
-import optax
-from flax import serialization
 
 from mjx_protamer.config import check
 
@@ -183,129 +180,3 @@ def weighted_loss(params, apply, obs, action, weight, target):
     """sum_i w_i (pred_i - h_i)^2 / sum_i w_i; an ensemble's (members, B) predictions: the members' sum."""
     pred = apply(params, obs, action)
     return jnp.sum(weight * (pred - target) ** 2) / jnp.maximum(jnp.sum(weight), 1e-8)
-
-
-class FeedbackBuffer:
-    """Host ring buffer of credited steps: obs, action, weight, target."""
-
-    def __init__(self, capacity: int, obs_size: int, action_size: int):
-        self.capacity = capacity
-        self.obs = np.zeros((capacity, obs_size), np.float32)
-        self.action = np.zeros((capacity, action_size), np.float32)
-        self.weight = np.zeros((capacity,), np.float32)
-        self.target = np.zeros((capacity,), np.float32)
-        self.ptr = 0
-        self.size = 0
-
-    def add(self, obs, action, weight, target) -> None:
-        n = len(weight)
-        if n > self.capacity:  # keep the most recent rows
-            obs, action, weight, target = obs[-self.capacity:], action[-self.capacity:], \
-                weight[-self.capacity:], target[-self.capacity:]
-            n = self.capacity
-        rows = (self.ptr + np.arange(n)) % self.capacity
-        self.obs[rows], self.action[rows], self.weight[rows], self.target[rows] = obs, action, weight, target
-        self.ptr = int((self.ptr + n) % self.capacity)
-        self.size = int(min(self.size + n, self.capacity))
-
-    def sample(self, rng: np.random.Generator, batch_size: int):
-        rows = rng.integers(0, self.size, batch_size)
-        return self.obs[rows], self.action[rows], self.weight[rows], self.target[rows]
-
-
-def fixed_batch(rng: np.random.Generator, batch_size: int, obs, action, weight, target):
-    """Fit any number of rows into one batch of `batch_size` rows with the same weighted loss in
-    expectation: pad with zero-weight rows, or draw rows with probability proportional to weight (each
-    drawn row then carries weight 1, which keeps sum(w e^2)/sum(w) unbiased)."""
-    n = len(weight)
-    if n <= batch_size:
-        pad = batch_size - n
-        z = lambda a: np.concatenate([a, np.zeros((pad, *a.shape[1:]), a.dtype)])
-        return z(obs), z(action), z(weight), z(target)
-    p = weight / weight.sum()
-    rows = rng.choice(n, batch_size, p=p)
-    return obs[rows], action[rows], np.ones(batch_size, np.float32), target[rows]
-
-
-class RewardModel:
-    """r_hat with its optimiser and feedback buffer; host-side driver of jitted updates."""
-
-    def __init__(self, config: RewardModelConfig, obs_size: int, action_size: int, seed: int = 0):
-        self.config = config
-        self.obs_size, self.action_size = obs_size, action_size
-        nets = reward_nets(config)
-        self.apply = nets.apply
-        self.params = nets.net.init(jax.random.PRNGKey(seed), jnp.zeros((1, obs_size)), jnp.zeros((1, action_size)))
-        self.optimizer = optax.adam(config.learning_rate)
-        self.opt_state = self.optimizer.init(self.params)
-        self.buffer = FeedbackBuffer(config.buffer_size, obs_size, action_size)
-        self.rng = np.random.default_rng(seed)
-        self.updates = 0
-        self.last_loss = float("nan")
-        self._steps_since_replay = 0
-        self._update = jax.jit(functools.partial(_update, nets.fit, self.optimizer))
-
-    def _step(self, batch) -> float:
-        if self.config.balance_signs:
-            buf = self.buffer
-            factors = sign_factors(np, buf.weight[:buf.size], buf.target[:buf.size], self.config.balance_max)
-            obs, action, weight, target = batch
-            batch = (obs, action, balanced_weight(np, factors, weight, target).astype(np.float32), target)
-        self.params, self.opt_state, loss = self._update(self.params, self.opt_state, *map(jnp.asarray, batch))
-        self.updates += 1
-        self.last_loss = float(loss)
-        return self.last_loss
-
-    def add(self, obs, action, weight, target, update: bool = True) -> None:
-        """Store credited rows, and (Deep TAMER) take `updates_per_feedback` steps on them now."""
-        obs = np.asarray(obs, np.float32).reshape(-1, self.obs_size)
-        action = np.asarray(action, np.float32).reshape(-1, self.action_size)
-        weight, target = np.asarray(weight, np.float32).ravel(), np.asarray(target, np.float32).ravel()
-        if len(weight) == 0:
-            return
-        self.buffer.add(obs, action, weight, target)
-        if update:
-            for _ in range(self.config.updates_per_feedback):
-                self._step(fixed_batch(self.rng, self.config.batch_size, obs, action, weight, target))
-
-    def replay(self, n: int = 1) -> None:
-        """n minibatch steps on uniformly drawn buffer rows (nothing until replay_min_rows are stored)."""
-        if self.buffer.size < min(self.config.replay_min_rows, self.buffer.capacity):
-            return
-        for _ in range(n):
-            self._step(self.buffer.sample(self.rng, self.config.batch_size))
-
-    def maybe_replay(self, env_steps: int) -> int:
-        """Account for env steps run; one replay minibatch per `replay_every` of them. Returns updates."""
-        if self.config.replay_every == 0:
-            return 0
-        self._steps_since_replay += env_steps
-        n = self._steps_since_replay // self.config.replay_every
-        self._steps_since_replay -= n * self.config.replay_every
-        before = self.updates
-        self.replay(n)
-        return self.updates - before
-
-    def predict(self, obs, action) -> np.ndarray:
-        return np.asarray(self.apply(self.params, jnp.asarray(obs, jnp.float32), jnp.asarray(action, jnp.float32)))
-
-    def state_dict(self) -> dict:
-        return {"params": serialization.to_state_dict(self.params),
-                "opt_state": serialization.to_state_dict(self.opt_state), "updates": self.updates}
-
-    def save(self, path) -> None:
-        with open(path, "wb") as fh:
-            fh.write(serialization.msgpack_serialize(self.state_dict()))
-
-    def load(self, path) -> None:
-        with open(path, "rb") as fh:
-            raw = serialization.msgpack_restore(fh.read())
-        self.params = serialization.from_state_dict(self.params, raw["params"])
-        self.opt_state = serialization.from_state_dict(self.opt_state, raw["opt_state"])
-        self.updates = int(raw["updates"])
-
-
-def _update(apply, optimizer, params, opt_state, obs, action, weight, target):
-    loss, grads = jax.value_and_grad(weighted_loss)(params, apply, obs, action, weight, target)
-    updates, opt_state = optimizer.update(grads, opt_state, params)
-    return optax.apply_updates(params, updates), opt_state, loss

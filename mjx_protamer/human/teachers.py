@@ -430,6 +430,12 @@ class HostTeacher:
         self.emitted += n
         return n
 
+    def take_scheduled(self) -> list[FeedbackEvent]:
+        """Every scheduled event, earliest first, out of the schedule (a simulated speaker says them itself)."""
+        events = [e for _, _, e in sorted(self._pending)]
+        self._pending.clear()
+        return events
+
     @property
     def pending(self) -> int:
         return len(self._pending)

@@ -1,9 +1,10 @@
 """Region signals on the self-touch env: a `region:head` / `region:hip` rule fires exactly on the steps the
-env's region mask says, in the in-jit feedback chunk and in the host teacher of `finetune`, and the mask rides
-beside the chunk's transitions without entering the replay.
+env's region mask says, in the in-jit feedback chunk and in the simulated teacher of a live session (`finetune`), and the mask
+rides beside the chunk's transitions without entering the replay.
 
-One tiny self-touch setup (4 envs, one 100-step chunk) and two compiled chunks (the host loop's and the
-in-jit one). Random actions never reach the head in so few steps, so the actor holds one pose that does: its
+One tiny self-touch setup: a live session's learner (one env, one 100-step chunk) watched by its simulated
+teacher, and 4 envs for the in-jit path (one reference chunk that says what the worlds touched, one feedback
+chunk). Random actions never reach the head in so few steps, so the actor holds one pose that does: its
 last layer's kernel is zeroed and its bias is the pose (found by holding 512 random poses for 1 s: with this
 one the hip is touched from ~0.1 s and the head from ~0.2 s, mostly at separate times), without noise and with a
 learning rate too small to move it (0 is refused). Every path then steps the same worlds.
@@ -49,24 +50,40 @@ def holding_pose(ts):
 
 @pytest.fixture(scope="module")
 def runs():
+    from mjx_protamer.agents.ddpg.train import make_train
     from mjx_protamer.envs.body import REGIONS
     from mjx_protamer.experiments.env_factory import make_env
     from mjx_protamer.experiments.feedback_train import make_feedback_train
     from mjx_protamer.experiments.table2 import Table2Config
-    from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
+    from mjx_protamer.human.clock import VirtualClock
+    from mjx_protamer.human.feedback_config import SessionConfig
+    from mjx_protamer.live.sources import SimulatedTeacher
+    from mjx_protamer.live.tamer import TamerLearner, session_pretrain
 
     assert (REGIONS[HEAD], REGIONS[HIP]) == ("head", "hip")
     cfg = from_dict(Table2Config, RAW)
     env = make_env(cfg.pretrain)
     key = jax.random.PRNGKey(cfg.pretrain.train.seed)
+    fc, T = cfg.feedback, cfg.pretrain.train.chunk_steps
 
-    # the host path (`protamer finetune` with a simulated teacher): one chunk of TamerRun
-    run = TamerRun(FeedbackRunConfig(cfg.pretrain, cfg.feedback), env, feedback="simulated:keyboard")
-    run.state = holding_pose(run.state)
-    run.commit_state()
-    _, _, ref_steps, ref_extras = run.trainer.collect_chunk(holding_pose(run.trainer.init(key)), run.model.params)
-    run.step_chunk()
-    host_events = [e for e, _, _ in run.outcomes] + [e for _, _, e in run.teacher._pending]
+    # the host path (`protamer finetune --feedback simulated:keyboard`): one chunk of the session's learner (one
+    # env), seen by its simulated teacher, then drained (as live/loop.py)
+    session = SessionConfig()
+    clock = VirtualClock(start=1000.0)
+    learner = TamerLearner(session_pretrain(cfg.pretrain, T, session, {}, cfg.pretrain.ddpg.replay_size), env, fc,
+                           session, use_model=True, clock=clock)
+    teacher = SimulatedTeacher(learner.queue, fc.teacher, fc.dt, fc.seed, env, clock)
+    learner.state = holding_pose(learner.state)
+    learner.commit()
+    chunk = learner.step_chunk(clock())
+    clock.set(chunk.t0 + T * fc.dt)
+    teacher.observe(chunk)
+    outcomes = learner.take_events(chunk.first_step + T - 1)
+    host_events = [o.event for o in outcomes] + teacher.teacher.take_scheduled()  # drained, and not yet due
+
+    # what the 4 worlds of the in-jit path touch: a reference chunk of the same worlds (same seed, held pose)
+    ref = make_train(cfg.pretrain, env)
+    _, _, ref_steps, ref_extras = ref.collect_chunk(holding_pose(ref.init(key)), None)
 
     # the in-jit path (table2, pretrain --feedback simulated:...): one feedback chunk
     ft = make_feedback_train(cfg.pretrain, env, cfg.feedback, cfg.batched)
@@ -74,7 +91,7 @@ def runs():
     ts, fs, metrics, events = ft.chunk(ts, fs, ft.params("keyboard", cfg.feedback.credit))
     mask = np.asarray(ref_extras["region_mask"])  # (T, B, 8): what the env said each step touched
     return dict(cfg=cfg, env=env, mask=mask, ref_obs=np.asarray(ref_steps.obs),
-                ref_terms=np.asarray(ref_steps.reward_terms), run=run, host_events=host_events,
+                ref_terms=np.asarray(ref_steps.reward_terms), chunk=chunk, host_events=host_events,
                 ts=ts, metrics=jax.device_get(metrics), events=jax.device_get(events), ft=ft)
 
 
@@ -86,13 +103,15 @@ def test_region_clauses_fire_exactly_where_the_mask_says_in_jit_and_on_the_host(
     # the worlds must touch the head on some steps and not on others, or the test proves nothing
     assert 0 < (mask[..., HEAD] > 0).sum() < T * B and (expected != 0).any()
 
-    # host: the watched env's teacher gave feedback on exactly the steps the rule scores, with that score
-    w = runs["cfg"].feedback.watch_env
+    # host: the session's simulated teacher gave feedback on exactly the steps the rule scores on the region
+    # mask of the learner's chunk, with that score
+    chunk = runs["chunk"]
+    assert chunk.first_step == 0 and chunk.region_mask.shape == (T, 8)
+    on_host = chunk.region_mask[:, HEAD] - chunk.region_mask[:, HIP]
+    assert 0 < (chunk.region_mask[:, HEAD] > 0).sum() < T and (on_host != 0).any()  # or it proves nothing
     host = {e.details["about_step"]: e.details["score"] for e in runs["host_events"]}
-    # the host loop stepped the same worlds as the reference chunk (all warm-up, same seed)
-    np.testing.assert_array_equal(runs["run"].last_chunk["obs"], runs["ref_obs"][:, w])
-    assert sorted(host) == np.flatnonzero(expected[:, w]).tolist()
-    assert all(host[t] == expected[t, w] for t in host)
+    assert sorted(host) == np.flatnonzero(on_host).tolist()
+    assert all(host[t] == on_host[t] for t in host)
 
     # in jit: the chunk's mean hidden score over every env and step is the hand-computed one, and every event
     # delivered is about a step the rule scored, with its sign
@@ -103,9 +122,10 @@ def test_region_clauses_fire_exactly_where_the_mask_says_in_jit_and_on_the_host(
     about, env_i, value = ev["about"][present], ev["env"][present], ev["value"][present]
     assert (value > 0).any() and (value < 0).any()
     assert np.array_equal(np.sign(value), expected[about, env_i])
-    # the in-jit teacher of the watched env judged the same steps as the host teacher (some of its deliveries
+    # every step the in-jit teacher of an env judged is one the rule scores in that env (some of its deliveries
     # can be dropped by the pending ring when two land on one arrival step, none invented)
-    assert set(about[env_i == w].tolist()) <= set(host)
+    for b in range(B):
+        assert set(about[env_i == b].tolist()) <= set(np.flatnonzero(expected[:, b]).tolist())
 
 
 def test_the_region_mask_rides_beside_the_transitions_not_in_the_replay(runs):
@@ -129,8 +149,10 @@ def test_region_signals_are_a_config_error_where_there_are_no_regions_or_no_such
     from mjx_protamer.experiments.env_factory import make_env
     from mjx_protamer.experiments.feedback_train import make_feedback_train
     from mjx_protamer.experiments.table2 import Table2Config
-    from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
-    from mjx_protamer.human.tamer_loop import FeedbackRunConfig, TamerRun
+    from mjx_protamer.human.clock import VirtualClock
+    from mjx_protamer.human.queue import FeedbackQueue
+    from mjx_protamer.human.teachers import env_signal_columns
+    from mjx_protamer.live.sources import SimulatedTeacher
 
     from toy_feedback import toy_feedback_config
 
@@ -140,10 +162,12 @@ def test_region_signals_are_a_config_error_where_there_are_no_regions_or_no_such
     toy_env = make_env(toy.pretrain)
     with pytest.raises(ConfigError, match="'region:head' reads body regions, and this env has none"):
         make_feedback_train(toy.pretrain, toy_env, toy.feedback)
-    with pytest.raises(ConfigError, match="this env has none"):  # the host teachers check before they run
-        TamerRun(FeedbackRunConfig(toy.pretrain, toy.feedback), toy_env, feedback="simulated:keyboard")
+    # a live session's simulated teacher (the one source of either learner, DDPG + DeepTAMER or COACH) checks
+    # its rule against the env before the session runs
+    with pytest.raises(ConfigError, match="'region:head' reads body regions, and this env has none"):
+        env_signal_columns(toy.feedback.teacher.signals, toy_env)
     with pytest.raises(ConfigError, match="this env has none"):
-        CoachRun(CoachRunConfig(), toy_env, feedback="simulated:keyboard", teacher=toy.feedback.teacher)
+        SimulatedTeacher(FeedbackQueue(8), toy.feedback.teacher, toy.feedback.dt, 0, toy_env, VirtualClock())
     cfg = runs["cfg"]
     bad = dataclasses.replace(cfg.feedback, teacher=from_dict(type(cfg.feedback.teacher), {
         **TEACHER, "rule": [{"signal": "region:foot", "value": 1.0, "above": 0.5}]}))

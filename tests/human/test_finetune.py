@@ -90,15 +90,43 @@ class PtyProc:
         return self.proc.returncode
 
 
-def reward_model_changed(out: Path, obs_size=6, action_size=2) -> bool:
-    from mjx_protamer.human.reward_model import RewardModel, RewardModelConfig
+def saved_reward_model(out: Path):
+    """(the session's reward model as saved in OUT/reward_model/, a fresh one of the same config) ."""
     import jax
 
-    fresh = RewardModel(RewardModelConfig(), obs_size, action_size, seed=0)
-    saved = RewardModel(RewardModelConfig(), obs_size, action_size, seed=0)
-    saved.load(out / "reward_model.msgpack")
-    return saved.updates > 0 and any(not np.allclose(a, b) for a, b in zip(
+    from mjx_protamer.experiments import checkpoints
+    from mjx_protamer.experiments.run_loader import load_run
+    from mjx_protamer.human.feedback_config import FeedbackRunConfig
+    from mjx_protamer.config import load_config
+    from mjx_protamer.live.reward_model import SessionRewardModel
+
+    cfg = load_config(FeedbackRunConfig, out / "feedback_config.yaml")
+    _, env, _, _ = load_run(out)
+    sc = cfg.session
+    fresh = SessionRewardModel(cfg.feedback.reward_model, cfg.feedback.credit, env.observation_size, env.action_size,
+                               cfg.feedback.seed, 50, sc.max_events_per_chunk, sc.rows_per_event)
+    mngr = checkpoints.manager(out / "reward_model")
+    try:
+        saved = checkpoints.restore(mngr, mngr.latest_step(), jax.eval_shape(lambda: fresh.state))
+    finally:
+        mngr.close()
+    return saved, fresh.state
+
+
+def reward_model_changed(out: Path) -> bool:
+    import jax
+
+    saved, fresh = saved_reward_model(out)
+    return int(saved.updates) > 0 and any(not np.allclose(a, b) for a, b in zip(
         jax.tree.leaves(fresh.params), jax.tree.leaves(saved.params)))
+
+
+def tree_digest(directory: Path) -> str:
+    """The checksum of the newest save in an orbax directory written by experiments/checkpoints.py."""
+    from mjx_protamer.experiments import checkpoints
+
+    step = checkpoints.available_steps(directory)[-1]
+    return json.loads((directory / str(step) / "manifest.json").read_text())["sha256"]
 
 
 # ---------------------------------------------------------------- the keyboard thread on a real terminal
@@ -152,8 +180,8 @@ def test_silences_gated_on_attention_without_the_live_page_is_a_clear_error(tmp_
 
 
 def test_bad_listen_source_and_missing_wav(tmp_path, capsys):
-    assert run_main("--feedback", "whisper", "--listen-source", "speaker", "--checkpoint", tmp_path) == 2
-    assert "--listen-source must be 'mic' or 'wav:PATH'" in capsys.readouterr().err
+    assert run_main("--feedback", "whisper", "--listen-source", "bogus", "--checkpoint", tmp_path) == 2
+    assert "--listen-source must be 'mic', 'wav:PATH' or 'speaker'" in capsys.readouterr().err
     code = run_main("--feedback", "whisper", "--listen-source", f"wav:{tmp_path / 'none.wav'}", "--checkpoint", tmp_path)
     assert code == 3 and "none.wav" in capsys.readouterr().err
 
@@ -201,14 +229,14 @@ def test_finetune_keyboard_in_a_terminal_confirms_credits_saves_and_loads(toy_ru
     assert p.wait() == 0, p.text
     text = p.text
     assert "[feedback] +1 accepted" in text and "[feedback] -1 accepted" in text and "credited steps" in text
-    assert "saved checkpoint, reward model and feedback log" in text
+    assert f"[finetune] saved in {out}: 2 events" in text
     assert "[view] http://127.0.0.1:" in text and "?token=" in text  # the default view without a display
     accepted = FeedbackLog.read(out / "feedback.jsonl")
     assert [e.value for e in accepted] == [1.0, -1.0] and all(e.source == "keyboard" for e in accepted)
     assert reward_model_changed(out)
     from mjx_protamer.experiments.evaluate import load_run
-    cfg, _, state, step = load_run(out)  # what `protamer eval --checkpoint OUT` loads
-    assert cfg.train.num_envs == 1 and step > 0
+    cfg, _, state, _ = load_run(out)  # what `protamer eval --checkpoint OUT` loads
+    assert cfg.train.num_envs == 1 and int(state.iteration) > 0
 
 
 @pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")
@@ -220,25 +248,25 @@ def test_finetune_ctrl_c_mid_run_saves_and_exits_130(toy_run, tmp_path):
     p.read_until("[event] keyboard +1.00")
     p.send("\x03")  # Ctrl-C typed at the terminal: SIGINT to the foreground process
     assert p.wait() == 130, p.text
-    assert "Ctrl-C: stopping after this chunk" in p.text and "saved checkpoint" in p.text
-    assert (out / "reward_model.msgpack").is_file() and any((out / "checkpoints").iterdir())
+    assert "Ctrl-C: stopping after this chunk" in p.text and f"[finetune] saved in {out}" in p.text
+    assert any((out / "reward_model").iterdir()) and any((out / "checkpoints").iterdir())
     records = FeedbackLog.records(out / "feedback.jsonl")
     assert records[-1].get("event") == "end" and len(FeedbackLog.read(out / "feedback.jsonl")) == 1
 
 
 # ---------------------------------------------------------------- Deep COACH
 
-def _coach_run(clock=None):
+def _coach_learner(clock):
     from mjx_protamer.agents.coach import CoachConfig
     from mjx_protamer.envs.toy import PointReachEnv
-    from mjx_protamer.human.coach_loop import CoachRun, CoachRunConfig
+    from mjx_protamer.live.coach import CoachSessionLearner
 
-    cfg = CoachRunConfig(coach=CoachConfig(hidden=(16,), learning_rate=3e-3, human_delay_steps=1, batch_windows=8),
-                         chunk_steps=20, episode_length=50, dt=0.05, min_interval_steps=2)
-    return CoachRun(cfg, PointReachEnv(), feedback=None, clock=clock)
+    coach = CoachConfig(hidden=(16,), learning_rate=3e-3, human_delay_steps=1, batch_windows=8)
+    return CoachSessionLearner(coach, PointReachEnv(), dt=0.05, chunk_steps=20, episode_length=50,
+                               min_interval_steps=2, seed=0, clock=clock)
 
 
-def test_coach_run_learns_from_events_through_the_real_queue(tmp_path):
+def test_coach_learner_learns_from_events_through_the_real_queue(tmp_path):
     """A scripted human who wants the point to move right: after each chunk, 5 events go through the real
     FeedbackQueue, each stamped just after a step it judges (+1 when that step's sampled action went
     further right than the policy's mean, else -1). Nothing else trains the policy; the mean horizontal
@@ -246,20 +274,21 @@ def test_coach_run_learns_from_events_through_the_real_queue(tmp_path):
     from mjx_protamer.human.clock import VirtualClock
     from mjx_protamer.human.events import FeedbackEvent
 
-    run = _coach_run(clock=VirtualClock(start=1000.0))
+    clock = VirtualClock(start=1000.0)
+    run = _coach_learner(clock)
     run.log = FeedbackLog(tmp_path / "fb.jsonl")
     rng = np.random.default_rng(0)
     test_obs = rng.uniform(-1, 1, (200, 6)).astype(np.float32)
     before = float(run.learner.mean_action(test_obs)[:, 0].mean())
     for _ in range(60):
-        first = run.first_step
-        m = run.step_chunk()
-        mean = run.learner.mean_action(m["obs"])
-        for j in sorted(rng.choice(np.arange(run.config.min_interval_steps, 19), 5, replace=False)):
-            t = run.step_clock.time_of(first + j + 1) + 0.01  # pressed while the next step was shown
-            value = 1.0 if m["actions"][j, 0] > mean[j, 0] else -1.0
+        chunk = run.step_chunk(clock())
+        clock.set(chunk.t0 + 20 * 0.05)
+        mean = run.learner.mean_action(chunk.obs)
+        for j in sorted(rng.choice(np.arange(run.min_interval_steps, 19), 5, replace=False)):
+            t = run.step_clock.time_of(chunk.first_step + j + 1) + 0.01  # pressed while the next step was shown
+            value = 1.0 if chunk.action[j, 0] > mean[j, 0] else -1.0
             assert run.queue.put(FeedbackEvent(t, t, "keyboard", value))
-    run.process_events(run.first_step - 1)
+        run.take_events(run.first_step - 1)
     run.close()
     after = float(run.learner.mean_action(test_obs)[:, 0].mean())
     print(f"COACH mean horizontal action {before:+.3f} -> {after:+.3f}; {run.corrections} corrections "
@@ -273,42 +302,38 @@ def test_finetune_coach_learner_saves_a_policy_that_loads(toy_run, tmp_path, cap
     out = tmp_path / "coach"
     assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run, "--out", out,
                     "--max-chunks", "2") == 0
-    assert "saved coach policy" in capsys.readouterr().out
-    assert (out / "coach_policy.msgpack").is_file() and (out / "feedback.jsonl").is_file()
+    assert f"[finetune] saved in {out}" in capsys.readouterr().out
+    assert any((out / "coach_policy").iterdir()) and (out / "feedback.jsonl").is_file()
     assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run, "--out", tmp_path / "again",
-                    "--max-chunks", "1", "--coach-policy", out / "coach_policy.msgpack") == 0
+                    "--max-chunks", "1", "--coach-policy", out) == 0
     assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run,
-                    "--coach-policy", tmp_path / "missing.msgpack") == 2
+                    "--coach-policy", tmp_path / "missing") == 2
 
 
 def test_finetune_coach_starts_from_the_checkpoints_actor(toy_run, tmp_path):
     """By default COACH's mean is the pretrained actor (feedback corrects the pretrained behaviour, not a random
     one); a policy saved that way is refused, with the reason, by a session built from scratch."""
-    import jax
-    import jax.numpy as jnp
-    from flax import serialization
-
-    from mjx_protamer.agents.coach.networks import GaussianPolicy
     from mjx_protamer.agents.ddpg.networks import Actor
     from mjx_protamer.experiments.run_loader import load_run
+    from mjx_protamer.live.build import build_learner, load_checkpoint
+    from mjx_protamer.live.spec import SessionSpec
 
     out = tmp_path / "coach"
     assert run_main("--learner", "coach", "--feedback", "none", "--checkpoint", toy_run, "--out", out,
                     "--max-chunks", "1") == 0
     pre, env, state, _ = load_run(Path(toy_run))
-    hidden = tuple(pre.ddpg.actor_hidden)
-    policy = GaussianPolicy(env.action_size, hidden, -1.0, "relu")
-    template = policy.init(jax.random.PRNGKey(0), jnp.zeros((1, env.observation_size)))
-    params = serialization.from_bytes(template, (out / "coach_policy.msgpack").read_bytes())
+    spec = SessionSpec.create(learner="coach", feedback="none", out=tmp_path / "unused", checkpoint=Path(toy_run),
+                              config=None)
+    learner = build_learner(spec, load_checkpoint(Path(toy_run)), clock=lambda: 0.0)
+    learner.load_policy(out)  # the saved policy, into a session built like it
     obs = np.random.default_rng(0).normal(size=(32, env.observation_size)).astype(np.float32)
-    mean, log_std = policy.apply(params, obs)
-    actor = Actor(env.action_size, hidden).apply(state.actor_params, obs)
+    mean, log_std = learner.learner.policy.apply(learner.learner.params, obs)
+    actor = Actor(env.action_size, tuple(pre.ddpg.actor_hidden)).apply(state.actor_params, obs)
     np.testing.assert_allclose(np.asarray(mean), np.asarray(actor), atol=1e-6)
     assert float(np.abs(np.asarray(actor)).mean()) > 1e-3  # a trained actor, not zeros
     np.testing.assert_allclose(np.asarray(log_std), -1.0)
     assert run_main("--learner", "coach", "--coach-init", "scratch", "--feedback", "none", "--checkpoint", toy_run,
-                    "--out", tmp_path / "scratch", "--max-chunks", "1",
-                    "--coach-policy", out / "coach_policy.msgpack") == 2
+                    "--out", tmp_path / "scratch", "--max-chunks", "1", "--coach-policy", out) == 2
 
 
 def test_finetune_takes_the_reward_weights_and_reward_model_from_the_session_config(toy_run, tmp_path, capsys):
@@ -320,8 +345,9 @@ def test_finetune_takes_the_reward_weights_and_reward_model_from_the_session_con
     out = tmp_path / "weights"
     assert run_main("--feedback", "none", "--checkpoint", toy_run, "--out", out, "--max-chunks", "1") == 0
     assert yaml.safe_load((out / "config.yaml").read_text())["ddpg"]["reward_beta"] == 1.0
-    assert yaml.safe_load((out / "feedback_config.yaml").read_text())["reward_model"]["bounded"] is True
-    assert json.loads((out / "session.json").read_text())["reward_weights"] == [1.0, 1.0]
+    assert yaml.safe_load((out / "feedback_config.yaml").read_text())["feedback"]["reward_model"]["bounded"] is True
+    taken = json.loads((out / "session.json").read_text())["session_ddpg"]
+    assert taken["reward_alpha"] == taken["reward_beta"] == 1.0 and "human_actor_coef" in taken
     out2 = tmp_path / "half"
     assert run_main("--feedback", "none", "--checkpoint", toy_run, "--out", out2, "--max-chunks", "1",
                     "--set", "pretrain.ddpg.reward_beta=0.5", "--fresh-replay") == 0
@@ -334,7 +360,7 @@ def test_finetune_takes_the_reward_weights_and_reward_model_from_the_session_con
     assert int(load_run(out)[2].replay.size) == min(pretrained, 20_000) + steps
     assert int(load_run(out2)[2].replay.size) == steps
     capsys.readouterr()
-    for bad in ("pretrain.ddpg.actor_lr=0.1", "feedback.credit.schme=x"):
+    for bad in ("pretrain.ddpg.tau=0.1", "feedback.credit.schme=x"):
         code = run_main("--feedback", "none", "--checkpoint", toy_run, "--out", tmp_path / "bad",
                         "--max-chunks", "1", "--set", bad)
         assert code == 2, bad
@@ -382,12 +408,11 @@ def test_finetune_whisper_from_a_wav_of_espeak_speech(toy_run, tmp_path):
     assert reward_model_changed(out)
     assert len(list((out / "segments").glob("*.wav"))) == 2  # the scored utterances, for replay
     # the voice session replays without a human or a microphone: the same reward model, bit for bit
-    from mjx_protamer.human.session_record import read_session
+    from mjx_protamer.live.record import read_session
     manifest, _ = read_session(out)
     assert Path(manifest["segments"]) == out / "segments"
     assert run_main("--replay", out, "--out", tmp_path / "again") == 0
-    r1, r2 = _reward_model_params(out / "reward_model.msgpack"), _reward_model_params(tmp_path / "again" / "reward_model.msgpack")
-    assert r1["updates"] == r2["updates"] > 0 and _leaves_equal(r1["params"], r2["params"])
+    assert tree_digest(out / "reward_model") == tree_digest(tmp_path / "again" / "reward_model")
     from mjx_protamer.experiments.evaluate import load_run
     assert _leaves_equal(load_run(out)[2].actor_params, load_run(tmp_path / "again")[2].actor_params)
 
@@ -476,16 +501,11 @@ def _leaves_equal(a, b) -> bool:
     return len(la) == len(lb) and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(la, lb))
 
 
-def _reward_model_params(path: Path):
-    from flax import serialization
-    return serialization.msgpack_restore(path.read_bytes())
-
-
 @pytest.mark.parametrize("learner", ["ddpg", "coach"])
 def test_replay_of_a_recorded_session_reaches_the_same_parameters_bit_for_bit(toy_run, tmp_path, capsys, learner):
     """A session with a simulated teacher is recorded; --replay reruns it headless from the manifest and the
-    chunk log alone (no teacher) and must end at exactly the same parameters."""
-    from mjx_protamer.human.session_record import read_session
+    chunk log alone (no teacher) and must end at exactly the same parameters, extra updates included."""
+    from mjx_protamer.live.record import read_session
 
     session, again = tmp_path / "session", tmp_path / "replay"
     assert run_main("--learner", learner, "--feedback", "simulated:keyboard", "--checkpoint", toy_run,
@@ -493,18 +513,21 @@ def test_replay_of_a_recorded_session_reaches_the_same_parameters_bit_for_bit(to
     manifest, records = read_session(session)
     events = sum(len(r["events"]) for r in records)
     assert events > 5 and manifest["checkpoint_sha256"] and manifest["learner"] == learner
+    chunks = [r for r in records if "first_step" in r]
+    if learner == "ddpg":  # unpaced: session.unpaced_updates_per_step 2 = 1 in the chunk + 50 extra a chunk
+        assert [r["extra"] for r in chunks] == [50] * 10
     assert run_main("--replay", session, "--out", again) == 0
     assert f"[replay] done: step 500, {events} events" in capsys.readouterr().out
     if learner == "coach":
-        assert (session / "coach_policy.msgpack").read_bytes() == (again / "coach_policy.msgpack").read_bytes()
+        assert tree_digest(session / "coach_policy") == tree_digest(again / "coach_policy")
         return
     from mjx_protamer.experiments.evaluate import load_run
-    _, _, s1, step1 = load_run(session)
-    _, _, s2, step2 = load_run(again)
-    assert step1 == step2 == 500
+    _, _, s1, _ = load_run(session)
+    _, _, s2, _ = load_run(again)
+    assert int(s1.iteration) == int(s2.iteration) == 500
     assert _leaves_equal(s1.actor_params, s2.actor_params) and _leaves_equal(s1.critic_params, s2.critic_params)
-    r1, r2 = _reward_model_params(session / "reward_model.msgpack"), _reward_model_params(again / "reward_model.msgpack")
-    assert r1["updates"] == r2["updates"] > 0 and _leaves_equal(r1["params"], r2["params"])
+    assert tree_digest(session / "reward_model") == tree_digest(again / "reward_model")
+    assert int(saved_reward_model(session)[0].updates) > 0
     # the replayed log holds the same events
     assert [e.to_json() for e in FeedbackLog.read(session / "feedback.jsonl")] == \
         [e.to_json() for e in FeedbackLog.read(again / "feedback.jsonl")]
@@ -526,7 +549,11 @@ def test_replay_refuses_a_changed_checkpoint_and_a_missing_session(toy_run, tmp_
     assert "is not a recorded finetune session" in capsys.readouterr().err
 
 
-def test_kill_9_of_a_session_loses_at_most_the_autosave_interval_and_resume_continues(toy_run, tmp_path):
+def test_kill_9_then_resume_loses_at_most_the_autosave_interval_and_the_replay_is_bit_for_bit(toy_run, tmp_path,
+                                                                                                capsys):
+    """A session killed with SIGKILL (no handler, no final save) resumes from its newest intact autosave: it loses
+    at most the autosave interval; the record marks what the killed process computed after that save as
+    superseded, and a replay of the resumed session reaches the resumed session's final state bit for bit."""
     out = tmp_path / "live"
     p = subprocess.Popen(protamer("finetune", "--feedback", "simulated:keyboard", "--checkpoint", toy_run, "--out", out,
                                   "--view", "none", "--autosave-s", "1", "--seconds", "300", "--no-pace", *TEACHER),
@@ -544,24 +571,31 @@ def test_kill_9_of_a_session_loses_at_most_the_autosave_interval_and_resume_cont
         if p.poll() is None:
             p.kill()
     assert len(saved_steps) == 3 and p.returncode == -9
-    from mjx_protamer.experiments import checkpoints
     from mjx_protamer.experiments.evaluate import load_run
+    from mjx_protamer.live.record import read_session
 
-    assert checkpoints.manager(out / "checkpoints").latest_step() >= saved_steps[-1]
-    _, _, state, step = load_run(out)  # whole and loadable
+    _, _, state, _ = load_run(out)  # whole and loadable
+    step = int(state.iteration)
     assert step >= saved_steps[-1]
-    rm = _reward_model_params(out / "reward_model.msgpack")
-    assert rm["updates"] > 0
+    assert int(saved_reward_model(out)[0].updates) > 0
     assert len(FeedbackLog.read(out / "feedback.jsonl")) > 0
     # --resume continues from the autosave: steps go on from there, the log grows
     before = len(FeedbackLog.records(out / "feedback.jsonl"))
-    r = subprocess.run(protamer("finetune", "--feedback", "simulated:keyboard", "--resume", "--out", out,
-                                "--view", "none", "--max-chunks", "2"),
+    r = subprocess.run(protamer("finetune", "--resume", "--out", out, "--view", "none", "--max-chunks", "2"),
                        capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     assert f"resumed at step {step}" in r.stdout and f"[step {step + 100:>7}]" in r.stdout
     assert len(FeedbackLog.records(out / "feedback.jsonl")) > before
-    assert checkpoints.manager(out / "checkpoints").latest_step() == step + 100
+    _, records = read_session(out)
+    assert [r["segment"] for r in records if "resume" in r] == [1]
+    kept = [r["first_step"] for r in records if "first_step" in r]
+    assert kept == sorted(kept) and kept[-1] == step + 50  # no chunk twice: the killed tail is superseded
+    assert run_main("--replay", out, "--out", tmp_path / "again") == 0
+    _, _, s1, _ = load_run(out)
+    _, _, s2, _ = load_run(tmp_path / "again")
+    assert int(s1.iteration) == int(s2.iteration) == step + 100
+    assert _leaves_equal(s1.actor_params, s2.actor_params) and _leaves_equal(s1.critic_params, s2.critic_params)
+    assert tree_digest(out / "reward_model") == tree_digest(tmp_path / "again" / "reward_model")
 
 
 def test_calibration_argument_errors(toy_run, tmp_path, capsys):
@@ -582,7 +616,7 @@ def test_resume_and_replay_argument_errors(tmp_path, capsys):
     assert run_main("--feedback", "none", "--resume") == 2
     assert "--resume needs --out" in capsys.readouterr().err
     assert run_main("--feedback", "none", "--resume", "--out", tmp_path) == 2
-    assert "holds no finetune session" in capsys.readouterr().err
+    assert "not a finetune-session to continue" in capsys.readouterr().err
     assert run_main("--feedback", "none") == 2
     assert "--checkpoint is required" in capsys.readouterr().err
     assert run_main("--feedback", "web", "--view", "none", "--checkpoint", tmp_path) == 2
@@ -596,7 +630,7 @@ def test_self_touch_session_runs_on_the_live_backend_records_it_and_replays_bit_
     from mjx_protamer.config import load_config
     from mjx_protamer.agents.ddpg.config import PretrainConfig
     from mjx_protamer.experiments.env_factory import resolve_backend
-    from mjx_protamer.human.session_record import read_session
+    from mjx_protamer.live.record import read_session
 
     pre = tmp_path / "pt"
     subprocess.run(protamer("pretrain", "--out", pre, "--no-progress", "--backend", "native",

@@ -13,7 +13,7 @@ import pytest
 from mjx_protamer.cli import main
 from mjx_protamer.human import reaction_delay as rd
 from mjx_protamer.human.events import FeedbackEvent
-from mjx_protamer.human.session_record import SessionRecorder
+from mjx_protamer.live.record import SessionRecorder
 from mjx_protamer.human.touches import TouchChanges, shown_touches, touch_onsets
 
 

@@ -1,69 +1,100 @@
-"""DDPG + DeepTAMER through the real queue on the toy env.
+"""DDPG + DeepTAMER of a live session (live/tamer.py) through the real queue on the toy env.
 
-The end-to-end test (slow): a simulated keyboard teacher who wants the point to move up (+1 when
-action[1] > 0.2, -1 when < -0.2) - something the env's reward does not ask for - feeds the real
-FeedbackQueue; events are credited on the step clock and train the reward model, whose params enter every
-DDPG chunk. Against DDPG alone with the same seeds, the deterministic actor's mean vertical action on test
-episodes must rise by at least 0.15 (measured +0.23: 0.03 -> 0.26, beta 1.0).
+A simulated keyboard teacher (live/sources.py) who wants the point to move up (+1 when action[1] > 0.2, -1 when
+< -0.2) - something the env's reward does not ask for - watches each chunk and feeds the real FeedbackQueue on
+a virtual clock; the learner credits the events on its step clock and its reward model (the batched path's ring
+and updates) absorbs them with the silences, and its params enter every DDPG chunk.
+
+The end-to-end test (slow): against DDPG alone with the same seeds, the deterministic actor's mean vertical
+action on test episodes must rise by at least 0.15.
 """
 
 import numpy as np
 import pytest
 
-from mjx_protamer.envs.toy import PointReachEnv
+from mjx_protamer.config import ConfigError
 from mjx_protamer.human.queue import FeedbackLog
-from mjx_protamer.human.tamer_loop import TamerRun, load_feedback_config, rollout_actions
+from mjx_protamer.live.sources import SimulatedTeacher
 
-TOY = ["pretrain.env_name=toy", "pretrain.ddpg.actor_hidden=[64,64]", "pretrain.ddpg.critic_hidden=[64,64]",
-       "pretrain.ddpg.reward_beta=1.0", "pretrain.ddpg.replay_size=20000", "pretrain.ddpg.tau=0.005",
-       "pretrain.train.num_envs=4", "pretrain.train.episode_length=50", "pretrain.train.warmup_env_steps=800",
-       "pretrain.train.chunk_steps=100", "feedback.dt=0.05", "feedback.reward_model.hidden=[64,64]",
-       "feedback.credit.min_interval_steps=2", "feedback.teacher.min_gap_steps=2", "feedback.teacher.give_rate=0.5",
-       "feedback.teacher.rule=[{signal: 'action:1', value: 1.0, above: 0.2}, "
-       "{signal: 'action:1', value: -1.0, below: -0.2}]"]
+from toy_session import run_chunk, toy_learner
+
+RULE = ["feedback.credit.min_interval_steps=2", "feedback.teacher.min_gap_steps=2", "feedback.teacher.give_rate=0.5",
+        "feedback.teacher.rule=[{signal: 'action:1', value: 1.0, above: 0.2}, "
+        "{signal: 'action:1', value: -1.0, below: -0.2}]"]
+
+
+def teacher_for(learner, cfg, env, clock):
+    return SimulatedTeacher(learner.queue, cfg.feedback.teacher, cfg.feedback.dt, cfg.feedback.seed, env, clock)
 
 
 def test_loop_smoke_events_flow_from_teacher_to_reward_model(tmp_path):
-    cfg = load_feedback_config(None, TOY + ["pretrain.train.total_env_steps=1200", "pretrain.train.warmup_env_steps=400",
-                                            "pretrain.ddpg.actor_hidden=[16]", "pretrain.ddpg.critic_hidden=[16,16]",
-                                            "feedback.reward_model.hidden=[16]", "feedback.credit.silence_weight=0.03"])
-    run = TamerRun(cfg, PointReachEnv(cfg.pretrain.toy), feedback="simulated:keyboard", log_path=tmp_path / "fb.jsonl")
-    before = run.model.predict(np.zeros((1, 6)), np.array([[0.0, 1.0]]))
-    for _ in range(cfg.pretrain.train.num_chunks):
-        m = run.step_chunk()
-    run.close()
-    assert run.events > 10 and run.credited > run.events and run.model.updates >= run.events
-    assert m["queue_overflow"] == 0 and m["queue_rejected"] == 0
+    learner, cfg, env, clock = toy_learner(RULE + ["feedback.credit.silence_weight=0.03"], log_path=tmp_path / "fb.jsonl",
+                                           warmup_env_steps=100)
+    teacher = teacher_for(learner, cfg, env, clock)
+    learner.warm_up()  # compiles; changes nothing
+    assert learner.model.updates == 0 and int(learner.model.state.ring.size) == 0 and learner.updates == 0
+    probe = np.zeros((1, env.observation_size)), np.array([[0.0, 1.0]])
+    before = learner.model.predict(*probe)
+    used, extra = 0, 0
+    for i in range(4):
+        _, outcomes = run_chunk(learner, clock, [teacher], extra=10 * i)
+        used += sum(o.why is None for o in outcomes)
+        extra += 10 * i
+    learner.close()
+    rows = cfg.session.rows_per_event
+    assert learner.events > 10 and used > 5 and learner.credited == rows * used
+    assert learner.model.updates >= used  # one minibatch step per credited event at least, then the replay
+    assert learner.status() == {"events": learner.events, "credited": learner.credited, "updates": 400 + extra,
+                                "r_hat_updates": learner.model.updates}
+    stats = learner.queue.stats()
+    assert stats["overflow"] == 0 and stats["rejected"] == 0
     logged = FeedbackLog.read(tmp_path / "fb.jsonl")
-    assert len(logged) == run.events and all(e.source == "simulated" for e in logged)
+    assert len(logged) == learner.events and all(e.source == "simulated" for e in logged)
     # every event judged a step the learner showed earlier
-    assert all(e.details["about_step"] < run.first_step for e in logged)
-    assert not np.allclose(before, run.model.predict(np.zeros((1, 6)), np.array([[0.0, 1.0]])))
-    # the teacher gives only +-1: the 0 rows are the steps it watched in silence, judged once their window closed
-    buf = run.model.buffer
-    zero = buf.target[:buf.size] == 0
-    assert zero.any() and np.allclose(buf.weight[:buf.size][zero], 0.03)
-    assert run.silent_next <= run.first_step - run.silence_reach / cfg.feedback.dt + 1
+    assert all(e.details["about_step"] < learner.first_step for e in logged)
+    assert not np.allclose(before, learner.model.predict(*probe))
+    # the ring: each credited event's rows_per_event rows weigh 1 with its +-1 label; the 0 rows are the steps
+    # the teacher watched in silence, judged once their window closed, each weighing silence_weight events
+    ring = learner.model.state.ring
+    n = int(ring.size)
+    weight, target = np.asarray(ring.weight[:n]), np.asarray(ring.target[:n])
+    zero = target == 0
+    assert zero.any() and np.allclose(weight[zero], 0.03 * rows)
+    assert (~zero).sum() == learner.credited and np.all(weight[~zero] == 1.0) and np.all(np.abs(target[~zero]) == 1)
+    assert learner.silent_next <= learner.first_step - learner.silence_reach / cfg.feedback.dt + 1
 
 
-def test_the_host_loop_refuses_silences_gated_by_an_attention_signal_it_lacks():
-    from mjx_protamer.config import ConfigError
+def test_a_session_refuses_silences_gated_by_an_attention_signal_its_teacher_lacks(tmp_path):
+    from mjx_protamer.live.spec import SessionSpec
 
-    cfg = load_feedback_config(None, TOY + ["feedback.credit.silence_needs_attention=true"])
+    gated = ["feedback.credit.silence_needs_attention=true"]
     with pytest.raises(ConfigError, match="silence_needs_attention"):
-        TamerRun(cfg, PointReachEnv(cfg.pretrain.toy), feedback="simulated:keyboard")
+        SessionSpec.create(learner="ddpg", feedback="simulated:keyboard", out=tmp_path / "s", checkpoint=None,
+                           config=None, overrides=gated)
+    # the live page reports attention: there it is allowed
+    SessionSpec.create(learner="ddpg", feedback="keyboard", view="web", out=tmp_path / "s", checkpoint=None,
+                       config=None, overrides=gated)
 
 
 @pytest.mark.slow
 def test_tamer_with_simulated_keyboard_teacher_moves_behaviour_its_way():
-    cfg = load_feedback_config(None, TOY + ["pretrain.train.total_env_steps=12000"])
-    env = PointReachEnv(cfg.pretrain.toy)
+    import jax
+
+    from mjx_protamer.agents.ddpg.evaluate import make_rollout
+
+    overrides = RULE + ["pretrain.ddpg.actor_hidden=[64,64]", "pretrain.ddpg.critic_hidden=[64,64]",
+                        "pretrain.ddpg.reward_beta=1.0", "pretrain.ddpg.replay_size=20000", "pretrain.ddpg.tau=0.005",
+                        "feedback.reward_model.hidden=[64,64]"]
     vertical = {}
-    for fb in (None, "simulated:keyboard"):
-        run = TamerRun(cfg, env, feedback=fb)
-        for _ in range(cfg.pretrain.train.num_chunks):
-            run.step_chunk()
-        out = rollout_actions(run.trainer, env, run.state.actor_params, 16, 50, seed=123)
-        vertical[fb] = float(out["action"][..., 1].mean())
-    print(f"mean vertical action: DDPG {vertical[None]:+.3f}, DDPG+DeepTAMER {vertical['simulated:keyboard']:+.3f}")
-    assert vertical["simulated:keyboard"] > vertical[None] + 0.15
+    for use_model in (False, True):
+        learner, cfg, env, clock = toy_learner(overrides, use_model=use_model, warmup_env_steps=200)
+        sources = [teacher_for(learner, cfg, env, clock)] if use_model else []
+        for _ in range(30):  # 3000 steps shown, 2 updates each (an unpaced session's)
+            run_chunk(learner, clock, sources, extra=100)
+        rollout = make_rollout(env, 50, cfg.pretrain.ddpg.actor_hidden)
+        out = rollout(learner.state.actor_params, jax.random.split(jax.random.PRNGKey(123), 16))
+        vertical[use_model] = float(np.asarray(out["action"])[..., 1].mean())
+        if use_model:
+            assert learner.events > 100
+    print(f"mean vertical action: DDPG {vertical[False]:+.3f}, DDPG+DeepTAMER {vertical[True]:+.3f}")
+    assert vertical[True] > vertical[False] + 0.15

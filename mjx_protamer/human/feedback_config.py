@@ -1,0 +1,93 @@
+"""The human side of a run as configuration: credit, reward model, simulated teacher, timing, and a live session.
+
+`configs/feedback_*.yaml` are `FeedbackRunConfig`s: a pretrain section (a PretrainConfig: what `pretrain
+--feedback` trains; a live session takes the checkpoint's instead, except the DDPG keys in
+`SESSION_DDPG_KEYS`), the feedback section and the session section. Loaded by the one validating loader
+(`mjx_protamer.config.load_config`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from mjx_protamer.agents.ddpg.config import PretrainConfig
+from mjx_protamer.config import check
+from mjx_protamer.human.credit import CreditConfig
+from mjx_protamer.human.reward_model import RewardModelConfig
+from mjx_protamer.human.teachers import TeacherConfig
+
+# Of a feedback config's pretrain section a live session takes only what DDPG learns from and how fast: the
+# reward weights, action biasing, the anchor and the step sizes. The rest (networks, env, noise) is the
+# checkpoint's. (Sessions recorded before 6 December took the two reward weights alone.)
+SESSION_DDPG_KEYS = ("reward_alpha", "reward_beta", "human_actor_coef", "anchor_coef", "actor_lr", "critic_lr")
+
+
+@dataclasses.dataclass(frozen=True)
+class FeedbackConfig:
+    """The human side of a run: credit, reward model, simulated teacher and timing."""
+
+    credit: CreditConfig = dataclasses.field(default_factory=CreditConfig)
+    reward_model: RewardModelConfig = dataclasses.field(default_factory=RewardModelConfig)
+    teacher: TeacherConfig = dataclasses.field(default_factory=TeacherConfig)
+    dt: float = 0.005  # presentation period of one env step (s): the env's control period in real time
+    watch_env: int = 0  # the env of the batch the teacher (or human) watches
+    queue_size: int = 256
+    seed: int = 0
+
+    def validate(self) -> None:
+        check(self.dt > 0, "dt", f"must be > 0, got {self.dt}")
+        check(self.watch_env >= 0, "watch_env", f"must be >= 0, got {self.watch_env}")
+        check(self.queue_size >= 1, "queue_size", f"must be >= 1, got {self.queue_size}")
+        check(0 <= self.seed < 2 ** 32, "seed", f"must be in 0..2^32-1, got {self.seed}")
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionConfig:
+    """How a live session's learner spends the machine and the person's feedback (mjx_protamer/live/;
+    docs/human_feedback.md, "How a session learns")."""
+
+    # DDPG updates interleaved with the env steps of a chunk (one per step, as pretraining does per env)
+    updates_per_step: int = 1
+    # Paced sessions: the time a chunk is shown and not computed goes to more updates, up to this many per shown
+    # step in all (the count is recorded per chunk, so a replay makes the same updates)
+    max_updates_per_step: float = 8.0
+    spare_fraction: float = 0.8  # the share of the measured spare time given to them (the rest absorbs jitter)
+    # Unpaced sessions (replays of nothing, `reproduce live`): this many updates per shown step in all, the pace a
+    # paced session keeps on this project's 2-core machine (`protamer bench live`)
+    unpaced_updates_per_step: float = 2.0
+    # the pretraining run's latest transitions a session's DDPG replay starts with (0: an empty replay)
+    replay_from_checkpoint: int = 20_000
+    max_events_per_chunk: int = 16  # feedback events credited per chunk (more are logged and dropped)
+    rows_per_event: int = 32  # credited steps drawn per event in proportion to their credit weight (batched: same)
+
+    def validate(self) -> None:
+        check(self.updates_per_step >= 1, "updates_per_step", f"must be >= 1, got {self.updates_per_step}")
+        check(self.max_updates_per_step >= self.updates_per_step, "max_updates_per_step",
+              f"must be >= updates_per_step ({self.updates_per_step}), got {self.max_updates_per_step}")
+        check(0.0 < self.spare_fraction <= 1.0, "spare_fraction", f"must be in (0, 1], got {self.spare_fraction}")
+        check(self.unpaced_updates_per_step >= self.updates_per_step, "unpaced_updates_per_step",
+              f"must be >= updates_per_step ({self.updates_per_step}), got {self.unpaced_updates_per_step}")
+        check(self.replay_from_checkpoint >= 0, "replay_from_checkpoint",
+              f"must be >= 0, got {self.replay_from_checkpoint}")
+        check(self.max_events_per_chunk >= 1, "max_events_per_chunk", f"must be >= 1, got {self.max_events_per_chunk}")
+        check(self.rows_per_event >= 1, "rows_per_event", f"must be >= 1, got {self.rows_per_event}")
+
+
+@dataclasses.dataclass(frozen=True)
+class FeedbackRunConfig:
+    """configs/feedback_*.yaml: a pretrain config (env, ddpg, train), the feedback section and a session's."""
+
+    pretrain: PretrainConfig = dataclasses.field(default_factory=PretrainConfig)
+    feedback: FeedbackConfig = dataclasses.field(default_factory=FeedbackConfig)
+    session: SessionConfig = dataclasses.field(default_factory=SessionConfig)
+
+    def validate(self) -> None:
+        check(self.feedback.watch_env < self.pretrain.train.num_envs, "feedback.watch_env",
+              f"must be < train.num_envs ({self.pretrain.train.num_envs})")
+
+
+def load_feedback_config(path=None, overrides=None) -> FeedbackRunConfig:
+    """Load a FeedbackRunConfig; the `pretrain` section is a PretrainConfig (DDPG engineer's)."""
+    from mjx_protamer.config import load_config
+
+    return load_config(FeedbackRunConfig, path, overrides)

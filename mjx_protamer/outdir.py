@@ -1,0 +1,105 @@
+"""An output directory a command may write into, checked and locked before anything heavy starts.
+
+A command writes only into a directory that is new, empty, or of its own kind when it continues one
+(`--resume`); anything else is refused in one line that says what is there. The directory is claimed with an
+exclusive lock (`fcntl.flock` on `.protamer.lock`, held for the life of the run and released by the kernel
+when the process dies, kill -9 included), and a probe file is written and removed, so an unwritable path
+fails in a second, not after minutes of loading. Each claimed directory holds `.protamer.json`: the kind of
+run that owns it. Pure Python (no JAX).
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import os
+import time
+from pathlib import Path
+
+from mjx_protamer.errors import OutputDirError
+
+MARK = ".protamer.json"
+LOCK = ".protamer.lock"
+
+
+def _what_is_there(path: Path) -> str:
+    names = sorted(p.name for p in path.iterdir() if p.name not in (LOCK,))
+    shown = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+    if (path / "config.yaml").is_file() and (path / "checkpoints").is_dir():
+        return f"a pretrain run ({shown})"
+    return shown
+
+
+class Claim:
+    """A locked output directory; `release()` (or the process's end) unlocks it."""
+
+    def __init__(self, path: Path, fd: int):
+        self.path = path
+        self._fd = fd
+
+    def release(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+
+def kind_of(path: str | Path) -> str | None:
+    """The kind of run that claimed `path`, or None."""
+    try:
+        return json.loads((Path(path) / MARK).read_text(encoding="utf-8")).get("kind")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def claim(path: str | Path, kind: str, resume: bool = False, own: tuple[str, ...] = ()) -> Claim:
+    """Check, create and lock `path` for a run of `kind`. Without `resume` it must be new or empty; with it, a
+    directory claimed by a run of `kind` (or holding one of the files in `own`, for runs recorded before
+    claims existed). Raises OutputDirError with what is there and what to do."""
+    path = Path(path)
+    flag = "--out"
+    if path.exists() and not path.is_dir():
+        raise OutputDirError(f"{flag} {path} is a file, not a directory; give a directory")
+    if path.is_dir():
+        entries = [p for p in path.iterdir() if p.name != LOCK]
+        if resume:
+            theirs = kind_of(path)
+            if theirs != kind and not (theirs is None and any((path / f).exists() for f in own)):
+                what = f"a {theirs} run" if theirs else (_what_is_there(path) or "nothing")
+                raise OutputDirError(f"{flag} {path} holds {what}, not a {kind} to continue")
+        elif entries and not (len(entries) == 1 and entries[0].name == MARK):  # claimed, nothing written
+            raise OutputDirError(f"{flag} {path} is not empty (it holds {_what_is_there(path)}); give a new or "
+                                 f"empty directory" + (" or --resume to continue it" if kind_of(path) == kind else ""))
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputDirError(f"{flag} {path} cannot be created ({e.strerror or e}); give a writable place") from None
+    try:
+        fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as e:
+        raise OutputDirError(f"{flag} {path} is not writable ({e.strerror or e}); give a writable place") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as e:
+        os.close(fd)
+        if e.errno in (errno.EAGAIN, errno.EACCES):
+            raise OutputDirError(f"{flag} {path} is in use by another protamer run; wait for it to end or give "
+                                 "another directory") from None
+        raise
+    probe = path / f".probe{os.getpid()}"
+    try:
+        with open(probe, "wb") as fh:
+            fh.write(b"x" * 4096)
+            fh.flush()
+            os.fsync(fh.fileno())
+        probe.unlink()
+        if kind_of(path) != kind:
+            tmp = path / f".{MARK}.tmp{os.getpid()}"
+            tmp.write_text(json.dumps({"kind": kind, "claimed": time.time()}), encoding="utf-8")
+            os.replace(tmp, path / MARK)
+    except OSError as e:
+        os.close(fd)
+        probe.unlink(missing_ok=True)
+        raise OutputDirError(f"{flag} {path} is not writable ({e.strerror or e}); free some space or give "
+                             "another place") from None
+    return Claim(path, fd)
