@@ -1,5 +1,6 @@
 """`protamer reproduce table2`: the paper's Table II and Figures 1-2 with simulated teachers; `reproduce rescore`:
-the agents of a finished table2 run scored again under another teacher rule."""
+the agents of a finished table2 run scored again under another teacher rule; `reproduce live`: whether minutes of
+a live session steer the infant, per feedback channel (experiments/live_effect.py)."""
 
 from __future__ import annotations
 
@@ -59,6 +60,31 @@ def register(subparsers) -> None:
     r.add_argument("--out", type=Path, default=None, help="output directory (default: RUN/rescore-<time>)")
     r.add_argument("--quiet", action="store_true", help="no per-condition progress lines")
     r.set_defaults(handler=_rescore)
+    v = sub.add_parser(
+        "live",
+        help="live sessions with a simulated teacher vs without feedback, from N checkpoints, per channel",
+        description="From each checkpoint: a `protamer finetune` session without feedback and one per channel with "
+        "a simulated teacher holding a hidden rule (keyboard: unpaced; prosody and whisper: a simulated person "
+        "speaking through the real listener at real-time pace); each final actor on the checkpoint's test "
+        "episodes; paired differences with 95% CIs, the drift without feedback, the voice pipeline's delivery. "
+        "Writes live_effect.json/.md/.png in --out.",
+    )
+    src = v.add_mutually_exclusive_group(required=True)
+    src.add_argument("--checkpoints", type=Path, nargs="+", help="pretrain runs, one per seed")
+    src.add_argument("--pretrain-seeds", type=int, help="pretrain the main job for seeds 0..N-1 into OUT/checkpoints "
+                     "first (kept when finished)")
+    v.add_argument("--channels", default="keyboard", help="comma-separated: keyboard, prosody, whisper "
+                   "(default keyboard)")
+    v.add_argument("--minutes", type=float, default=2.0, help="shown time per session (default 2)")
+    v.add_argument("--rule-config", type=Path, default=None, help="a table2 YAML whose hidden rule the teacher holds "
+                   "(default: the built-in default's lateral rule)")
+    v.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="a session setting for every session, e.g. --set pretrain.ddpg.human_actor_coef=0 (the "
+                   "paper's alpha r_env + beta r_hat DDPG)")
+    v.add_argument("--episodes", type=int, default=10, help="test episodes per actor (default 10)")
+    v.add_argument("--parallel", type=int, default=1, help="unpaced sessions at once (default 1)")
+    v.add_argument("--out", type=Path, required=True, help="output directory; sessions finished there are kept")
+    v.set_defaults(handler=_live)
 
 
 def _table2(args: argparse.Namespace) -> int:
@@ -93,4 +119,32 @@ def _rescore(args: argparse.Namespace) -> int:
     print(Path(result["table_md"]).read_text())
     for key in ("table_md", "table_json"):
         print(f"{key:<13} {result[key]}")
+    return 0
+
+
+def _live(args: argparse.Namespace) -> int:
+    from mjx_protamer.config import ConfigError
+    from mjx_protamer.experiments.live_effect import CHANNELS, Plan, pretrain_checkpoints, run_live_effect
+    from mjx_protamer.live.spec import _number, check_config_file
+
+    channels = tuple(c.strip() for c in args.channels.split(",") if c.strip())
+    bad = [c for c in channels if c not in CHANNELS]
+    if bad or not channels:
+        raise ConfigError(f"--channels: {', '.join(bad) or 'none given'}; use keyboard, prosody and/or whisper")
+    check_config_file(args.rule_config, "--rule-config")
+    minutes = _number("--minutes", args.minutes, 0.01, 600)
+    episodes = _number("--episodes", args.episodes, 1, 1000, integer=True)
+    parallel = _number("--parallel", args.parallel, 1, 64, integer=True)
+    if args.pretrain_seeds is not None:
+        checkpoints = pretrain_checkpoints(args.out, _number("--pretrain-seeds", args.pretrain_seeds, 2, 1000, True))
+    else:
+        checkpoints = args.checkpoints
+        missing = [c for c in checkpoints if not (Path(c) / "config.yaml").is_file()]
+        if missing:
+            raise ConfigError(f"--checkpoints: {missing[0]} is not a pretrain run directory (no config.yaml)")
+    plan = Plan(tuple(Path(c) for c in checkpoints), args.out, channels, minutes, 250.0, args.rule_config,
+                tuple(args.overrides), episodes, parallel)
+    summary = run_live_effect(plan)
+    print((args.out / "live_effect.md").read_text())
+    print(f"json {args.out / 'live_effect.json'}\nfigure {args.out / 'live_effect.png'}\nwall {summary['wall_s']:.0f} s")
     return 0

@@ -1,0 +1,292 @@
+"""`protamer reproduce live`: does a few minutes of a live session steer the infant? Paired sessions per checkpoint.
+
+From each pretrained checkpoint (one per seed of the main job) sessions of the same length run through the real
+`protamer finetune` (one process each, live/session.py): one without feedback (DDPG goes on learning from the
+intrinsic reward alone), and one per channel with a simulated teacher who holds a hidden rule (a table2 config's,
+the built-in lateral rule by default):
+- keyboard: `--feedback simulated:keyboard`, unpaced (shown faster than real time, `session.unpaced_updates_per_step`
+  updates per shown step, the no-feedback session's too);
+- prosody, whisper: `--listen-source speaker`: the simulated person speaks through the real listener (VAD ->
+  prosody or Whisper + sentiment), so these sessions run paced at real time, with at most the same updates per
+  shown step as the others.
+Each final actor then runs the checkpoint's own test episodes (deterministic actor, its test seed), scored by the
+hidden rule (`teacher_score`) and the paper's metrics. Per channel: the paired difference teacher - no feedback
+over checkpoints (mean, 95% CI, per checkpoint), the drift of the no-feedback sessions from the checkpoint, the
+freeze in both arms, and for the voice channels what the pipeline delivered of what the speaker said (latency,
+sign accuracy, misses). Finished sessions are kept: `--resume` continues.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+METRICS = ("teacher_score", "unique_regions", "freeze_ratio", "contact_rate")
+CHANNELS = ("keyboard", "prosody", "whisper")
+DONE = "DONE"  # written into a session's directory when its process exited 0
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    checkpoints: tuple[Path, ...]
+    out: Path
+    channels: tuple[str, ...] = ("keyboard",)
+    minutes: float = 2.0
+    chunk_ms: float = 250.0
+    rule_config: Path | None = None
+    overrides: tuple[str, ...] = ()  # --set for every session (e.g. a mechanism's setting)
+    episodes: int = 10
+    parallel: int = 1  # unpaced sessions at once (paced ones always run alone)
+
+    @property
+    def chunks(self) -> int:
+        return int(round(self.minutes * 60_000 / self.chunk_ms))
+
+
+def rule_override(rule_config) -> str:
+    """`feedback.teacher.rule=[...]` carrying a table2 config's hidden rule into a session."""
+    from mjx_protamer.experiments.table2 import load_table2_config
+
+    rule = load_table2_config(rule_config).feedback.teacher.rule
+    return "feedback.teacher.rule=" + json.dumps([dataclasses.asdict(c) for c in rule])
+
+
+def _session_argv(plan: Plan, ckpt: Path, arm: str, seed: int, out: Path) -> list[str]:
+    argv = [sys.executable, "-m", "mjx_protamer.cli", "finetune", "--checkpoint", str(ckpt), "--out", str(out),
+            "--view", "none", "--chunk-ms", str(plan.chunk_ms), "--max-chunks", str(plan.chunks),
+            "--autosave-s", "0", "--set", rule_override(plan.rule_config), "--set", f"feedback.seed={seed}"]
+    if arm in ("none", "keyboard"):
+        argv += ["--feedback", "none" if arm == "none" else "simulated:keyboard", "--no-pace"]
+    else:  # the simulated speaker, at real-time pace, no more updates per shown step than the unpaced sessions
+        argv += ["--feedback", arm, "--listen-source", "speaker"]
+    for o in plan.overrides:
+        argv += ["--set", o]
+    if arm in ("prosody", "whisper"):
+        argv += ["--set", "session.max_updates_per_step=" + str(_unpaced_ups(plan))]
+    return argv
+
+
+def _unpaced_ups(plan: Plan) -> float:
+    from mjx_protamer.human.feedback_config import load_feedback_config
+    from mjx_protamer.live.spec import DEFAULT_FEEDBACK_CONFIG
+
+    return load_feedback_config(DEFAULT_FEEDBACK_CONFIG, list(plan.overrides)).session.unpaced_updates_per_step
+
+
+def _run_session(argv: list[str], out: Path, log=print) -> float:
+    """One session into `out` (kept when it finished before); its wall time (s)."""
+    if (out / DONE).is_file():
+        return float("nan")
+    if out.exists():  # an unfinished session of an earlier run: start it again
+        import shutil
+
+        shutil.rmtree(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    with open(out.with_suffix(".log"), "w") as fh:
+        code = subprocess.run(argv, stdout=fh, stderr=subprocess.STDOUT).returncode
+    if code != 0:
+        raise RuntimeError(f"the session in {out} failed (exit {code}); see {out.with_suffix('.log')}")
+    (out / DONE).write_text("ok")
+    wall = time.perf_counter() - t0
+    log(f"[live] {out.name}: {wall:.0f} s")
+    return wall
+
+
+def scorer(checkpoint: Path, rule_config, episodes: int):
+    """score(actor_params) -> the rule's teacher_score and the paper's metrics on the checkpoint's test episodes
+    (the one rollout, agents/ddpg/evaluate.py)."""
+    import jax
+
+    from mjx_protamer.agents.ddpg.evaluate import make_rollout
+    from mjx_protamer.experiments import metrics as M
+    from mjx_protamer.experiments.evaluate import eval_seed
+    from mjx_protamer.experiments.run_loader import load_run
+    from mjx_protamer.experiments.table2 import load_table2_config
+    from mjx_protamer.human.teachers import env_signal_columns, rule_scores, rule_signals
+
+    pre, env, state, _ = load_run(checkpoint)
+    teacher = load_table2_config(rule_config).feedback.teacher
+    cols = env_signal_columns(teacher.signals, env)
+    rollout = make_rollout(env, pre.train.episode_length, pre.ddpg.actor_hidden)
+    keys = jax.random.split(jax.random.PRNGKey(eval_seed(pre)), episodes)
+
+    def score(actor_params) -> dict:
+        sig = jax.device_get(rollout(actor_params, keys))
+        s = np.asarray(rule_scores(teacher, rule_signals(cols, sig["obs"], sig["action"], sig["reward_terms"],
+                                                         sig["region_mask"])))
+        ev = M.summarize(sig["self_contact"], sig["region_mask"], sig["arm_speed"], freeze_threshold=pre.env.freeze_speed)
+        return {"teacher_score": float(s.mean()), **{k: float(ev[k]) for k in METRICS[1:]}}
+
+    return score, state.actor_params
+
+
+def _session_facts(out: Path) -> dict:
+    """What a finished session itself reports: events, updates per shown step, the speaker's delivery."""
+    facts: dict = {}
+    log = out.with_suffix(".log")
+    if log.is_file():
+        for line in log.read_text(errors="replace").splitlines():
+            if line.startswith("[finetune] saved in"):
+                part = line.split(": ", 1)[1]
+                facts["events"] = int(part.split(" events")[0])
+                if "updates per shown step" in part:
+                    facts["updates_per_step"] = float(part.rsplit(", ", 1)[1].split()[0])
+    speaker = out / "speaker.jsonl"
+    if speaker.is_file():
+        last = speaker.read_text().strip().splitlines()[-1]
+        facts["speaker"] = json.loads(last)["summary"]
+    return facts
+
+
+def run_live_effect(plan: Plan, log=print) -> dict:
+    """Every session of the plan (kept where finished), then the scores, the statistics, the figure."""
+    from mjx_protamer.experiments.stats import contrast, seed_stats
+
+    plan.out.mkdir(parents=True, exist_ok=True)
+    arms = ("none", *plan.channels)
+    jobs = {arm: [] for arm in arms}
+    for k, ckpt in enumerate(plan.checkpoints):
+        for arm in arms:
+            d = plan.out / f"{arm}_{k}"
+            jobs[arm].append((_session_argv(plan, ckpt, arm, k, d), d))
+    unpaced = [j for arm in arms if arm in ("none", "keyboard") for j in jobs[arm]]
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(max(1, plan.parallel)) as ex:
+        list(ex.map(lambda j: _run_session(j[0], j[1], log), unpaced))
+    for arm in arms:
+        if arm in ("prosody", "whisper"):
+            for argv, d in jobs[arm]:
+                _run_session(argv, d, log)
+    rows = []
+    from mjx_protamer.experiments.run_loader import load_run
+
+    for k, ckpt in enumerate(plan.checkpoints):
+        score, start = scorer(ckpt, plan.rule_config, plan.episodes)
+        row = {"checkpoint": str(ckpt), "start": score(start)}
+        for arm in arms:
+            d = plan.out / f"{arm}_{k}"
+            row[arm] = {**score(load_run(d)[2].actor_params), **_session_facts(d)}
+        rows.append(row)
+        log(f"[live] checkpoint {k}: teacher score start {row['start']['teacher_score']:+.3f}, "
+            + ", ".join(f"{a} {row[a]['teacher_score']:+.3f}" for a in arms))
+    summary = {"plan": {**{k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(plan).items()},
+                        "checkpoints": [str(c) for c in plan.checkpoints], "out": str(plan.out)},
+               "command": " ".join(sys.argv), "per_checkpoint": rows, "wall_s": time.perf_counter() - t0,
+               "pooled": {}, "paired": {}, "drift": {}}
+    for arm in ("start", *arms):
+        summary["pooled"][arm] = {m: seed_stats([r[arm][m] for r in rows]) for m in METRICS}
+    for arm in plan.channels:
+        summary["paired"][arm] = {m: contrast([r["none"][m] for r in rows], [r[arm][m] for r in rows])
+                                  for m in METRICS}
+        voice = [r[arm].get("speaker") for r in rows if r[arm].get("speaker")]
+        if voice:
+            summary["paired"][arm]["speaker"] = _pool_speaker(voice)
+    summary["drift"] = {m: seed_stats([r["none"][m] - r["start"][m] for r in rows]) for m in METRICS}
+    _write(plan.out / "live_effect.json", json.dumps(summary, indent=1))
+    (plan.out / "live_effect.md").write_text(markdown(summary))
+    figure(summary, plan.out / "live_effect.png")
+    return summary
+
+
+def _pool_speaker(summaries: list[dict]) -> dict:
+    said = sum(s["said"] for s in summaries)
+    delivered = sum(s["delivered"] for s in summaries)
+    acc = [s["sign_accuracy"] for s in summaries if s["sign_accuracy"] is not None]
+    lat = [s["latency_s_median"] for s in summaries if s["latency_s_median"] is not None]
+    return {"said": said, "delivered": delivered, "missed": said - delivered,
+            "sign_accuracy_mean": float(np.mean(acc)) if acc else None,
+            "latency_s_median_of_sessions": float(np.median(lat)) if lat else None,
+            "held_back": sum(s["held_back"] for s in summaries), "stray_events": sum(s["stray_events"] for s in summaries)}
+
+
+def _write(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def _cell(st: dict, digits: int = 3) -> str:
+    if st["mean"] is None:
+        return "-"
+    ci = "" if st["ci95"] is None else f" ± {st['ci95']:.{digits}f}"
+    return f"{st['mean']:+.{digits}f}{ci}"
+
+
+def markdown(summary: dict) -> str:
+    plan = summary["plan"]
+    n = len(summary["per_checkpoint"])
+    lines = [f"# A live session's effect: {n} checkpoints x {plan['minutes']:g} min shown per session",
+             "", f"Rule: {plan['rule_config'] or 'the built-in default (lateral: right hand +1, left -1)'}; "
+             f"session settings {plan['overrides'] or 'as shipped'}; mean ± 95% CI over checkpoints.", "",
+             "| | " + " | ".join(METRICS) + " |", "|---|" + "---|" * len(METRICS)]
+    for arm, st in summary["pooled"].items():
+        lines.append(f"| {arm} | " + " | ".join(_cell(st[m]) for m in METRICS) + " |")
+    for arm, c in summary["paired"].items():
+        lines.append(f"| paired {arm} - none | " + " | ".join(
+            _cell(c[m]["paired"]) if c[m]["paired"] else "-" for m in METRICS) + " |")
+    lines.append("| drift: none - start | " + " | ".join(_cell(summary["drift"][m]) for m in METRICS) + " |")
+    lines += ["", "Per checkpoint (teacher score): " + "; ".join(
+        f"{k}: start {r['start']['teacher_score']:+.2f}, " + ", ".join(
+            f"{a} {r[a]['teacher_score']:+.2f}" for a in r if a not in ("checkpoint", "start"))
+        for k, r in enumerate(summary["per_checkpoint"]))]
+    for arm, c in summary["paired"].items():
+        if "speaker" in c:
+            s = c["speaker"]
+            lines.append(f"- {arm} through the simulated speaker: said {s['said']}, delivered {s['delivered']}, "
+                         f"missed {s['missed']}, sign accuracy {s['sign_accuracy_mean']}, latency from the end of "
+                         f"the words {s['latency_s_median_of_sessions']} s (median of sessions)")
+    return "\n".join(lines) + "\n"
+
+
+def figure(summary: dict, path: Path) -> None:
+    """Per checkpoint: the teacher score at the start, without feedback and with each channel; pooled means."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = summary["per_checkpoint"]
+    arms = ["start", "none", *summary["paired"]]
+    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(arms), 4.2))
+    x = np.arange(len(arms))
+    for r in rows:
+        ax.plot(x, [r[a]["teacher_score"] for a in arms], color="0.75", lw=0.8, marker="o", ms=3, zorder=1)
+    for i, a in enumerate(arms):
+        st = summary["pooled"][a]["teacher_score"]
+        ax.errorbar(i, st["mean"], yerr=st["ci95"] or 0, color="C3" if a not in ("start", "none") else "k",
+                    marker="s", ms=7, capsize=5, lw=2, zorder=2)
+    ax.set_xticks(x, arms)
+    ax.axhline(0, color="0.6", lw=0.5)
+    ax.set_ylabel("teacher score (hidden rule, test episodes)")
+    plan = summary["plan"]
+    ax.set_title(f"{len(rows)} checkpoints, {plan['minutes']:g} min sessions; mean ± 95% CI, grey: per checkpoint",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def pretrain_checkpoints(out: Path, seeds: int, log=print) -> list[Path]:
+    """The main job (configs/pretrain.yaml) for seeds 0..N-1 into OUT/checkpoints/seedK, kept when finished."""
+    paths = []
+    for k in range(seeds):
+        d = out / "checkpoints" / f"seed{k}"
+        if not (d / "eval.json").is_file():
+            if d.exists():
+                import shutil
+
+                shutil.rmtree(d)
+            d.parent.mkdir(parents=True, exist_ok=True)
+            log(f"[live] pretraining the main job, seed {k} -> {d}")
+            subprocess.run([sys.executable, "-m", "mjx_protamer.cli", "pretrain", "--no-progress", "--set",
+                            f"train.seed={k}", "--out", str(d)], check=True, stdout=subprocess.DEVNULL)
+        paths.append(d)
+    return paths
