@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mjx_protamer.human import reaction_delay as rd
-from mjx_protamer.human.session_record import read_session, write_json_atomic
+from mjx_protamer.live.record import read_session, write_json_atomic
 from mjx_protamer.human.touches import shown_touches, touch_onsets
 
 

@@ -152,7 +152,8 @@ class RewardNets(NamedTuple):
 
 
 def reward_nets(config: "RewardModelConfig") -> RewardNets:
-    """The one place a reward-model config becomes networks (feedback_train, RewardModel, scripts)."""
+    """The one place a reward-model config becomes networks (feedback_train, live.reward_model's
+    SessionRewardModel, scripts)."""
     hidden = tuple(config.hidden)
     return RewardNets(RewardMLP(hidden, config.bounded, config.ensemble, config.asinh_obs),
                       reward_fn(hidden, config.bounded, config.ensemble, config.pessimism, config.asinh_obs),

@@ -130,6 +130,7 @@ class TamerLearner(ChunkLearner):
         if not self.use_model:
             return credit, None, _credit_text(credit)
         if len(self._credits) >= self.session.max_events_per_chunk:
+            self.history.samples(credit)  # its steps were judged, not watched in silence: never a 0 label
             return None, f"more than session.max_events_per_chunk ({self.session.max_events_per_chunk}) events " \
                          "in one chunk", ""
         obs, act, w, _ = self.history.samples(credit)

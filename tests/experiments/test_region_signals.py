@@ -1,13 +1,13 @@
 """Region signals on the self-touch env: a `region:head` / `region:hip` rule fires exactly on the steps the
-env's region mask says, in the in-jit feedback chunk and in the simulated teacher of a live session (`finetune`), and the mask
-rides beside the chunk's transitions without entering the replay.
+env's region mask says, in the in-jit feedback chunk and in the simulated teacher of a live session
+(`finetune`), and the mask rides beside the chunk's transitions without entering the replay.
 
-One tiny self-touch setup: a live session's learner (one env, one 100-step chunk) watched by its simulated
-teacher, and 4 envs for the in-jit path (one reference chunk that says what the worlds touched, one feedback
-chunk). Random actions never reach the head in so few steps, so the actor holds one pose that does: its
-last layer's kernel is zeroed and its bias is the pose (found by holding 512 random poses for 1 s: with this
-one the hip is touched from ~0.1 s and the head from ~0.2 s, mostly at separate times), without noise and with a
-learning rate too small to move it (0 is refused). Every path then steps the same worlds.
+One tiny self-touch setup: a live session's learner (one env, one 100-step chunk) seen by its simulated
+teacher, and 4 envs for the in-jit path (a reference chunk that says what they touched, and a feedback chunk
+of the same worlds). Random actions never reach the head in so few steps, so the actor holds one pose that does:
+its last layer's kernel is zeroed and its bias is the pose (found by holding 512 random poses for 1 s: with this
+one the hip is touched from ~0.1 s and the head from ~0.2 s, mostly at separate times), without noise and with
+a learning rate too small to move it (0 is refused). The two 4-env chunks then step the same worlds.
 """
 
 from __future__ import annotations

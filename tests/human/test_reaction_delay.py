@@ -13,7 +13,7 @@ import pytest
 from mjx_protamer.cli import main
 from mjx_protamer.human import reaction_delay as rd
 from mjx_protamer.human.events import FeedbackEvent
-from mjx_protamer.live.record import SessionRecorder
+from mjx_protamer.live.record import FORMAT, MANIFEST, SessionRecorder, write_json_atomic
 from mjx_protamer.human.touches import TouchChanges, shown_touches, touch_onsets
 
 
@@ -145,6 +145,12 @@ def test_our_simulated_teacher_as_the_person_gives_back_its_channel_delay():
     assert fit.reacted > 0.9
 
 
+def _recorder(path, manifest: dict) -> SessionRecorder:
+    """A session record's writer in `path`, its manifest written first (as live/session.py does)."""
+    write_json_atomic(path / MANIFEST, {**manifest, "record_format": FORMAT})
+    return SessionRecorder(path)
+
+
 def _record_session(path, onsets_steps, feedback_times, dt=0.005, chunk=50, steps=24000, t0=1000.0):
     """A recorded session on disk, as `protamer finetune` writes it: the manifest and one line per chunk
     with its touches and the feedback drained then."""
@@ -153,15 +159,15 @@ def _record_session(path, onsets_steps, feedback_times, dt=0.005, chunk=50, step
     flags = np.zeros((steps, 2), bool)
     for s in onsets_steps:
         flags[s:s + 40, 1] = True
-    rec = SessionRecorder(path, {"version": 1, "feedback": "keyboard", "chunk_steps": chunk,
-                                 "feedback_config": {"dt": dt, "teacher": {"channel": {"kind": "keyboard"}}}})
+    rec = _recorder(path, {"version": 2, "feedback": "keyboard", "chunk_steps": chunk,
+                           "feedback_config": {"dt": dt, "teacher": {"channel": {"kind": "keyboard"}}}})
     feedback = sorted(feedback_times)
     for i, first in enumerate(range(0, steps, chunk)):
         start = t0 + first * dt
         due = [t for t in feedback if t < start + chunk * dt]
         feedback = feedback[len(due):]
         rec.chunk(i, first, start, [FeedbackEvent(t, t, "keyboard", 1.0, {"key": "+"}) for t in due],
-                  changes.update(first, flags[first:first + chunk]))
+                  touches=changes.update(first, flags[first:first + chunk]))
     rec.close()
 
 
@@ -199,19 +205,19 @@ def test_the_command_explains_what_is_missing(tmp_path, capsys):
     assert "--window-s needs 0 <= LO < HI < inf" in capsys.readouterr().err
     bad = tmp_path / "bad"
     bad.mkdir()
-    SessionRecorder(bad, {}).close()  # a manifest without the feedback config
+    _recorder(bad, {}).close()  # a manifest without the feedback config
     assert main(["reaction-delay", str(bad)]) == 2
     assert "cannot read the session record (KeyError" in capsys.readouterr().err
     empty = tmp_path / "loading"
     empty.mkdir()
-    SessionRecorder(empty, {"feedback": "keyboard", "chunk_steps": 10, "feedback_config": {"dt": 0.01}}).close()
+    _recorder(empty, {"feedback": "keyboard", "chunk_steps": 10, "feedback_config": {"dt": 0.01}}).close()
     assert main(["reaction-delay", str(empty)]) == 2
     assert "showed no chunk (stopped while loading)" in capsys.readouterr().err
     toy = tmp_path / "toy"
     toy.mkdir()
-    rec = SessionRecorder(toy, {"feedback": "keyboard", "chunk_steps": 10, "feedback_config": {"dt": 0.01}})
+    rec = _recorder(toy, {"feedback": "keyboard", "chunk_steps": 10, "feedback_config": {"dt": 0.01}})
     for i in range(3):
-        rec.chunk(i, 10 * i, 0.1 * i, [], {})  # an env without regions records no touches
+        rec.chunk(i, 10 * i, 0.1 * i, [], touches={})  # an env without regions records no touches
     rec.close()
     assert main(["reaction-delay", str(toy)]) == 2
     assert "recorded no touches" in capsys.readouterr().err

@@ -28,8 +28,8 @@ def teacher_for(learner, cfg, env, clock):
 
 
 def test_loop_smoke_events_flow_from_teacher_to_reward_model(tmp_path):
-    learner, cfg, env, clock = toy_learner(RULE + ["feedback.credit.silence_weight=0.03"], log_path=tmp_path / "fb.jsonl",
-                                           warmup_env_steps=100)
+    learner, cfg, env, clock = toy_learner(RULE + ["feedback.credit.silence_weight=0.03"],
+                                           log_path=tmp_path / "fb.jsonl", warmup_env_steps=100)
     teacher = teacher_for(learner, cfg, env, clock)
     learner.warm_up()  # compiles; changes nothing
     assert learner.model.updates == 0 and int(learner.model.state.ring.size) == 0 and learner.updates == 0
@@ -62,6 +62,29 @@ def test_loop_smoke_events_flow_from_teacher_to_reward_model(tmp_path):
     assert zero.any() and np.allclose(weight[zero], 0.03 * rows)
     assert (~zero).sum() == learner.credited and np.all(weight[~zero] == 1.0) and np.all(np.abs(target[~zero]) == 1)
     assert learner.silent_next <= learner.first_step - learner.silence_reach / cfg.feedback.dt + 1
+
+
+def test_an_event_dropped_for_the_chunks_capacity_still_keeps_its_steps_from_being_silences():
+    """`session.max_events_per_chunk`: a drain's surplus events are not learnt from, but the steps they judged
+    were not watched in silence (the batched path counts every arrival against silence, draw_silent_steps), so
+    none of them becomes a 0 label: fewer silent rows than when that event was never given."""
+    from mjx_protamer.human.events import FeedbackEvent
+
+    silent, used = {}, {}
+    for with_b in (False, True):
+        learner, cfg, _, clock = toy_learner(["feedback.credit.silence_weight=0.03", "session.max_events_per_chunk=1"])
+        run_chunk(learner, clock, t0=1000.0)  # steps 0-99 shown over 1000-1005 s
+        learner.queue.put(FeedbackEvent(1002.0, 1002.0, "keyboard", 1.0, {"key": "+"}))
+        if with_b:  # 40 steps later, in the same drain: over the capacity
+            learner.queue.put(FeedbackEvent(1004.0, 1004.0, "keyboard", -1.0, {"key": "-"}))
+        run_chunk(learner, clock)
+        run_chunk(learner, clock)  # every window of the first chunk has closed
+        ring = learner.model.state.ring
+        target = np.asarray(ring.target[:int(ring.size)])
+        silent[with_b], used[with_b] = int((target == 0).sum()), int((target != 0).sum())
+    assert used[False] == used[True] == cfg.session.rows_per_event  # the dropped event taught nothing
+    assert (target != -1).all()
+    assert 0 < silent[True] < silent[False] - 5, silent
 
 
 def test_a_session_refuses_silences_gated_by_an_attention_signal_its_teacher_lacks(tmp_path):
