@@ -142,6 +142,10 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
               + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
               + f"; feedback config {spec.config_path or 'the built-in defaults'}", flush=True)
 
+    if getattr(learner, "attention", None) is not None:
+        print("[finetune] credit.silence_needs_attention: a silent step teaches 'nothing to say' only while the "
+              "live page is visible", flush=True)
+
     def on_ready():
         for s in sources:
             s.start()

@@ -93,6 +93,10 @@ def test_live_page_in_headless_chromium_shows_the_run_feeds_the_queue_and_says_w
             page.wait_for_function("document.getElementById('last').textContent.includes('credited steps')",
                                    timeout=20_000)
             assert page.inner_text("#learner").startswith("ddpg, feedback web")
+            # the learner spends the time a chunk is shown on more updates, and says so
+            page.wait_for_function("document.getElementById('pace').textContent.includes('updates per shown step')",
+                                   timeout=20_000)
+            assert float(page.inner_text("#pace").split()[0]) >= 1.0
             assert int(page.inner_text("#step")) > 0  # the step on screen
             # the page says whether it is seen: hidden (another tab, a minimised window), then shown again
             assert page.inner_text("#attention") == "the learner knows you are watching"
@@ -166,22 +170,27 @@ def _serve_in_thread(app):
     return f"http://127.0.0.1:{box['port']}", stop
 
 
-def test_a_calibration_sessions_snapshot_carries_its_task_into_the_pages_status():
-    """The path the prompt takes without a browser: the session's snapshot of a chunk, the view process's
-    Player, the status message the page receives."""
+def test_a_calibration_sessions_snapshot_carries_its_task_and_pace_into_the_pages_status():
+    """The path the prompt and the learning pace take without a browser: the session's view sink, the view
+    process's Player, the status message the page receives."""
     from types import SimpleNamespace
 
-    from mjx_protamer.commands.finetune_view import calibration_prompt, snapshot
+    from mjx_protamer.live.learner import Chunk
+    from mjx_protamer.live.sinks import ViewSink, calibration_prompt
     from mjx_protamer.view.playback import Player
 
-    run = SimpleNamespace(last_chunk={"first_step": 50, "obs": np.zeros((5, 3)), "action": np.zeros((5, 2))},
-                          events=3, corrections=2, learner=SimpleNamespace(updates=7), use_model=False)
-    metrics = {"contact_rate": 1.0, "step_reward": 0.5}
+    learner = SimpleNamespace(kind="coach", dt=0.005, predict=lambda chunk: None,
+                              status=lambda: {"events": 3, "corrections": 2, "updates": 7})
+    chunk = Chunk(50, 100.0, 100.0 + 0.005 * np.arange(5), np.zeros((5, 3)), np.zeros((5, 2)), np.zeros((5, 1)), None,
+                  {"contact_rate": 1.0, "step_reward": 0.5})
     for calibrate, expected in (("head", calibration_prompt("head")), (None, None)):
-        args = SimpleNamespace(learner="coach", feedback="keyboard", calibrate=calibrate)
         player = Player(scene_factory=None)
-        player.submit(snapshot(run, args, metrics, 100.0, 0.005, None))
-        assert player.status_message().get("prompt") == expected
+        view = SimpleNamespace(offer=player.submit)
+        ViewSink(view, SimpleNamespace(feedback="keyboard", calibrate=calibrate)).chunk(
+            learner, chunk, [], {"extra": 40, "updates_per_step": 1.8, "realtime": 1.4})
+        status = player.status_message()
+        assert status.get("prompt") == expected
+        assert status["updates_per_step"] == 1.8 and status["realtime"] == 1.4 and status["credited"] == 2
 
 
 def test_a_calibration_session_shows_its_task_on_the_page_and_an_ordinary_one_does_not():
@@ -191,8 +200,8 @@ def test_a_calibration_session_shows_its_task_on_the_page_and_an_ordinary_one_do
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         pytest.skip("needs Debian's chromium (apt-get install chromium; scripts/test.sh does as root)")
-    from mjx_protamer.commands.finetune_view import calibration_prompt
     from mjx_protamer.human.queue import FeedbackQueue
+    from mjx_protamer.live.sinks import calibration_prompt
     from mjx_protamer.view.server import make_app
 
     prompt = calibration_prompt("head")
@@ -216,3 +225,23 @@ def test_a_calibration_session_shows_its_task_on_the_page_and_an_ordinary_one_do
             finally:
                 stop()
         browser.close()
+
+
+def test_a_web_session_whose_page_cannot_start_exits_before_the_learner_starts(toy_run, tmp_path):
+    """`--feedback web` takes feedback from the page alone: with its port taken there is no way to give feedback,
+    so the session ends with a clear line and a non-zero exit before anything is compiled."""
+    import socket
+
+    taken = socket.socket()
+    taken.bind(("127.0.0.1", 0))
+    taken.listen(1)
+    port = taken.getsockname()[1]
+    try:
+        p = subprocess.run([sys.executable, "-m", "mjx_protamer.cli", "finetune", "--feedback", "web", "--view", "web",
+                            "--port", str(port), "--checkpoint", str(toy_run), "--out", str(tmp_path / "ft")],
+                           capture_output=True, text=True, env=ENV, cwd=ROOT, timeout=300)
+    finally:
+        taken.close()
+    assert p.returncode == 2, p.stdout + p.stderr
+    assert "--feedback web: the live page cannot start" in p.stderr and "--port" in p.stderr
+    assert "compiling" not in p.stdout and not (tmp_path / "ft" / "checkpoints").exists()
