@@ -11,7 +11,8 @@ import importlib
 import sys
 
 from mjx_protamer.config import ConfigError
-from mjx_protamer.errors import CheckpointError, OutOfMemoryEstimate, OutputDirError, SessionRecordError
+from mjx_protamer.errors import (CheckpointError, OutOfMemoryEstimate, OutputDirError, SessionRecordError,
+                                 WriteFailed)
 
 # Each module registers one or more subcommands; the order is the order shown in --help.
 COMMAND_MODULES = (
@@ -56,6 +57,9 @@ def main(argv: list[str] | None = None) -> int:
     except OutOfMemoryEstimate as e:
         print(f"protamer: not enough memory: {e}", file=sys.stderr)
         return 2
+    except WriteFailed as e:
+        print(f"protamer: write failed: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("protamer: interrupted", file=sys.stderr)
         return 130

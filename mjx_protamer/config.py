@@ -25,6 +25,9 @@ import yaml
 
 T = TypeVar("T")
 
+MAX_CONFIG_BYTES = 1 << 20  # a config file larger than this is refused before parsing (issue 42)
+SEED_MAX = 2 ** 32 - 1  # every seed (config or command line) is a uint32
+
 
 class ConfigError(ValueError):
     """A configuration value is missing, unknown or invalid; the message names the field."""
@@ -211,13 +214,29 @@ def from_dict(cls: type[T], raw: dict[str, Any] | None, section: str = "") -> T:
     return _build(cls, dict(raw or {}), prefix=f"{section}." if section else "")
 
 
+def check_seed(value: int, field: str) -> None:
+    """A seed field's rule: a uint32 (what JAX's and NumPy's generators take without wrapping or failing)."""
+    check(0 <= value <= SEED_MAX, field, f"must be a seed in 0..2^32-1, got {value}")
+
+
+def check_config_size(path: str | Path, what: str = "config file") -> None:
+    """Refuse a file over MAX_CONFIG_BYTES before it is read: a 64 MB YAML is parsed for minutes into gigabytes
+    (a config is a few KiB, so a large one is the wrong file)."""
+    size = Path(path).stat().st_size
+    if size > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{what} {path} is {size / 2**20:.1f} MiB; a config is a few KiB (the limit is "
+                          f"{MAX_CONFIG_BYTES // 2**20} MiB): is it the right file?")
+
+
 def read_raw(path: str | Path | None = None, overrides: list[str] | None = None) -> dict[str, Any]:
-    """The YAML mapping in `path` ({} when None) with `a.b=value` overrides applied, not yet validated."""
+    """The YAML mapping in `path` ({} when None) with `a.b=value` overrides applied, not yet validated. A file
+    larger than MAX_CONFIG_BYTES is refused before it is read."""
     raw: dict[str, Any] = {}
     if path is not None:
         path = Path(path)
         if not path.is_file():
             raise ConfigError(f"config file {path} does not exist")
+        check_config_size(path)
         try:
             raw = yaml_load(path.read_text())
         except yaml.YAMLError as e:

@@ -26,3 +26,15 @@ class SessionRecordError(ValueError):
 class OutputDirError(ValueError):
     """An output directory cannot be used (not empty, another kind of run's, locked, not writable); the message
     says what is there and what to give instead."""
+
+
+class WriteFailed(RuntimeError):
+    """A run could not write its files (a full disk, no permission); the message names the path and the last good
+    checkpoint, which `--resume` continues from. Exit code 1."""
+
+
+def write_failed(e: OSError, out, last_good: str, again: str) -> WriteFailed:
+    """The one line of a run stopped by a failed write: the path and why, what is kept, how to go on."""
+    path = e.filename or out
+    why = e.strerror or str(e) or type(e).__name__
+    return WriteFailed(f"{path}: {why}; {last_good}; free some space (or fix the permissions), then {again}")

@@ -10,6 +10,7 @@ run that owns it. Pure Python (no JAX).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import json
@@ -24,8 +25,11 @@ LOCK = ".protamer.lock"
 
 
 def _what_is_there(path: Path) -> str:
-    names = sorted(p.name for p in path.iterdir() if p.name not in (LOCK,))
+    names = sorted(p.name for p in path.iterdir() if p.name not in (LOCK, MARK))
     shown = ", ".join(names[:4]) + (f" and {len(names) - 4} more" if len(names) > 4 else "")
+    theirs = kind_of(path)
+    if theirs:
+        return f"a {theirs} run ({shown})"
     if (path / "config.yaml").is_file() and (path / "checkpoints").is_dir():
         return f"a pretrain run ({shown})"
     return shown
@@ -34,14 +38,34 @@ def _what_is_there(path: Path) -> str:
 class Claim:
     """A locked output directory; `release()` (or the process's end) unlocks it."""
 
-    def __init__(self, path: Path, fd: int):
+    def __init__(self, path: Path, fd: int, created: tuple[str, ...] = ()):
         self.path = path
         self._fd = fd
+        self._created = created  # what the claim itself made: "dir", LOCK, MARK
 
     def release(self) -> None:
         if self._fd >= 0:
             os.close(self._fd)
             self._fd = -1
+
+    def abandon(self) -> None:
+        """Release after a run that ended before writing anything (a refused config, not enough memory): the
+        directory is left as it was found, without the mark, lock or directory the claim made. A directory the
+        run wrote into keeps everything."""
+        try:
+            left = [p for p in self.path.iterdir() if p.name not in (LOCK, MARK)]
+        except OSError:
+            left = [None]
+        if not left and self._fd >= 0:
+            for name in (MARK, LOCK):
+                if name in self._created:
+                    (self.path / name).unlink(missing_ok=True)
+            if "dir" in self._created:
+                try:
+                    self.path.rmdir()
+                except OSError:
+                    pass
+        self.release()
 
 
 def kind_of(path: str | Path) -> str | None:
@@ -52,10 +76,25 @@ def kind_of(path: str | Path) -> str | None:
         return None
 
 
-def claim(path: str | Path, kind: str, resume: bool = False, own: tuple[str, ...] = ()) -> Claim:
+@contextlib.contextmanager
+def claimed(path: str | Path, kind: str, resume: bool = False, own: tuple[str, ...] = (), resumable: bool = True):
+    """`claim` for the life of a `with` block: released at its end; abandoned (`Claim.abandon`) when the block
+    raises, so a run refused before it wrote anything leaves no trace."""
+    held = claim(path, kind, resume, own, resumable)
+    try:
+        yield held
+    except BaseException:
+        held.abandon()
+        raise
+    held.release()
+
+
+def claim(path: str | Path, kind: str, resume: bool = False, own: tuple[str, ...] = (),
+          resumable: bool = True) -> Claim:
     """Check, create and lock `path` for a run of `kind`. Without `resume` it must be new or empty; with it, a
     directory claimed by a run of `kind` (or holding one of the files in `own`, for runs recorded before
-    claims existed). Raises OutputDirError with what is there and what to do."""
+    claims existed). Raises OutputDirError with what is there and what to do (`resumable`: whether the command
+    has a --resume to suggest)."""
     path = Path(path)
     flag = "--out"
     if path.exists() and not path.is_dir():
@@ -68,12 +107,15 @@ def claim(path: str | Path, kind: str, resume: bool = False, own: tuple[str, ...
                 what = f"a {theirs} run" if theirs else (_what_is_there(path) or "nothing")
                 raise OutputDirError(f"{flag} {path} holds {what}, not a {kind} to continue")
         elif entries and not (len(entries) == 1 and entries[0].name == MARK):  # claimed, nothing written
+            ours = kind_of(path) == kind or (kind_of(path) is None and any((path / f).exists() for f in own))
             raise OutputDirError(f"{flag} {path} is not empty (it holds {_what_is_there(path)}); give a new or "
-                                 f"empty directory" + (" or --resume to continue it" if kind_of(path) == kind else ""))
+                                 f"empty directory" + (" or --resume to continue it" if ours and resumable else ""))
+    created = () if path.is_dir() else ("dir",)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise OutputDirError(f"{flag} {path} cannot be created ({e.strerror or e}); give a writable place") from None
+    created += () if (path / LOCK).exists() else (LOCK,)
     try:
         fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as e:
@@ -97,9 +139,10 @@ def claim(path: str | Path, kind: str, resume: bool = False, own: tuple[str, ...
             tmp = path / f".{MARK}.tmp{os.getpid()}"
             tmp.write_text(json.dumps({"kind": kind, "claimed": time.time()}), encoding="utf-8")
             os.replace(tmp, path / MARK)
+            created += (MARK,)
     except OSError as e:
         os.close(fd)
         probe.unlink(missing_ok=True)
         raise OutputDirError(f"{flag} {path} is not writable ({e.strerror or e}); free some space or give "
                              "another place") from None
-    return Claim(path, fd)
+    return Claim(path, fd, created)

@@ -1,4 +1,4 @@
-"""`protamer bench env|train|voice [--json]`: speed benchmarks that print their figures.
+"""`protamer bench env|train|live|voice [--json]`: speed benchmarks that print their figures.
 
 Each benchmark lives with what it measures (experiments/bench_env.py, experiments/bench_train.py,
 audio_frontend/bench.py); this module only wires them to the command line and prints the result.
@@ -18,6 +18,9 @@ BENCHMARKS = {
             "MJX and native-physics env steps/s at several batch sizes vs MJX physics, native MuJoCo and the twin"),
     "train": ("mjx_protamer.experiments.bench_train", "run_train_benchmark",
               "DDPG training steps/s (single env, batched; MJX and native) with the single-env roofline, vs SB3"),
+    "live": ("mjx_protamer.experiments.bench_live", "run_live_benchmark",
+             "a paced live session with the web view and the Whisper listener (the simulated speaker): real-time "
+             "factor, updates per shown step, view frames/s, listener latency"),
     "tracking": ("mjx_protamer.experiments.tracking", "run_tracking_benchmark",
                  "position-servo tracking error on held random targets (free space and blocked)"),
     "voice": ("audio_frontend.bench", "run_voice_benchmark",

@@ -28,10 +28,10 @@ def register(subparsers) -> None:
     p.add_argument("--checkpoint", type=Path, required=True,
                    help="a pretrain or finetune run directory, its checkpoints/ directory, or one step in it")
     p.add_argument("--out", type=Path, required=True, help="output file: .mp4, .gif or .png")
-    p.add_argument("--episodes", type=int, default=1)
-    p.add_argument("--seed", type=int, default=None, help="test-episode seed (default: the run's eval seed)")
-    p.add_argument("--fps", type=float, default=25.0, help="frames per second of the video (real-time playback)")
-    p.add_argument("--size", type=int, default=480, help="frame width and height in pixels (>= 64)")
+    p.add_argument("--episodes", default=1, help="test episodes (default 1)")
+    p.add_argument("--seed", default=None, help="test-episode seed, 0..2^32-1 (default: the run's eval seed)")
+    p.add_argument("--fps", default=25.0, help="frames per second of the video (real-time playback; default 25)")
+    p.add_argument("--size", default=480, help="frame width and height in pixels (an even number, 64..4096)")
     p.set_defaults(handler=_render)
 
 
@@ -44,12 +44,19 @@ def _render(args: argparse.Namespace) -> int:
     from mjx_protamer.experiments.run_loader import resolve_checkpoint
     from mjx_protamer.view.video import check_path
 
-    if args.episodes < 1:
-        return _fail(f"--episodes must be >= 1, got {args.episodes}")
-    if args.fps <= 0:
-        return _fail(f"--fps must be > 0, got {args.fps}")
-    if args.size < 64 or args.size % 2:
-        return _fail(f"--size must be an even number >= 64, got {args.size}")
+    from mjx_protamer.cli_numbers import number, seed
+    from mjx_protamer.commands.train import MAX_EPISODES
+    from mjx_protamer.config import ConfigError
+
+    try:
+        args.episodes = number("--episodes", args.episodes, 1, MAX_EPISODES, integer=True)
+        args.seed = seed("--seed", args.seed)
+        args.fps = number("--fps", args.fps, 0.01, 1000)
+        args.size = number("--size", args.size, 64, 4096, integer=True)
+    except ConfigError as e:
+        return _fail(str(e))
+    if args.size % 2:
+        return _fail(f"--size must be an even number (the video's encoder needs one), got {args.size}")
     try:
         check_path(args.out)
         resolve_checkpoint(args.checkpoint)

@@ -32,7 +32,7 @@ def register(subparsers) -> None:
                    "habituation, the lateral rule (right hand +1, left -1), asinh reward-model inputs; configs/table2.yaml is the "
                    "earlier head rule without habituation, configs/table2_paper.yaml the paper's single-env "
                    "20-episode setting)")
-    t.add_argument("--seeds", type=int, default=None, help="run seeds 0..N-1 (default: the config's seeds)")
+    t.add_argument("--seeds", default=None, help="run seeds 0..N-1 (default: the config's seeds)")
     t.add_argument("--out", type=Path, default=None, help="output directory (default: runs/table2-<time>)")
     t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set pretrain.train.total_env_steps=32000 (repeatable)")
@@ -71,37 +71,53 @@ def register(subparsers) -> None:
     )
     src = v.add_mutually_exclusive_group(required=True)
     src.add_argument("--checkpoints", type=Path, nargs="+", help="pretrain runs, one per seed")
-    src.add_argument("--pretrain-seeds", type=int, help="pretrain the main job for seeds 0..N-1 into OUT/checkpoints "
+    src.add_argument("--pretrain-seeds", help="pretrain the main job for seeds 0..N-1 into OUT/checkpoints "
                      "first (kept when finished)")
     v.add_argument("--channels", default="keyboard", help="comma-separated: keyboard, prosody, whisper "
                    "(default keyboard)")
-    v.add_argument("--minutes", type=float, default=2.0, help="shown time per session (default 2)")
+    v.add_argument("--minutes", default=2.0, help="shown time per session (default 2)")
     v.add_argument("--rule-config", type=Path, default=None, help="a table2 YAML whose hidden rule the teacher holds "
                    "(default: the built-in default's lateral rule)")
     v.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="a session setting for every session, e.g. --set pretrain.ddpg.human_actor_coef=0 (the "
                    "paper's alpha r_env + beta r_hat DDPG)")
-    v.add_argument("--episodes", type=int, default=10, help="test episodes per actor (default 10)")
-    v.add_argument("--parallel", type=int, default=1, help="unpaced sessions at once (default 1)")
-    v.add_argument("--out", type=Path, required=True, help="output directory; sessions finished there are kept")
+    v.add_argument("--episodes", default=10, help="test episodes per actor (default 10)")
+    v.add_argument("--parallel", default=1, help="unpaced sessions at once (default 1)")
+    v.add_argument("--out", type=Path, required=True, help="output directory: new, empty, or one this command wrote "
+                   "before (its finished sessions are kept)")
     v.set_defaults(handler=_live)
 
 
+# What outdir.claim records in each command's --out, and the files that identify a directory written before claims
+# existed (a table2 run's are named after its conditions: see _table2)
+TABLE2, RESCORE, LIVE = "table2", "rescore", "live-effect"
+MAX_SEEDS = 100_000  # --seeds N runs seeds 0..N-1 side by side; the memory estimate decides how many fit
+
+
 def _table2(args: argparse.Namespace) -> int:
+    from mjx_protamer.cli_numbers import number
     from mjx_protamer.commands.train import _enable_compile_cache
     from mjx_protamer.experiments.table2 import load_table2_config
 
+    seeds = None if args.seeds is None else number("--seeds", args.seeds, 1, MAX_SEEDS, integer=True)
     overrides = list(args.overrides) + ([f"pretrain.env.backend={args.backend}"] if args.backend else [])
-    cfg = load_table2_config(args.config, overrides, args.seeds)
-    _enable_compile_cache()
+    cfg = load_table2_config(args.config, overrides, seeds)
     if args.resume and args.out is None:
         from mjx_protamer.config import ConfigError
         raise ConfigError("--resume needs --out: the directory of the table2 run to continue")
     out = args.out or Path("runs") / time.strftime("table2-%Y%m%d-%H%M%S")
-    from mjx_protamer.experiments.table2 import run_table2
+    own = ("table2.json",) + tuple(f"condition_{c.name}.json" for c in cfg.conditions)
+    from mjx_protamer.outdir import claimed
 
-    with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
-        result = run_table2(cfg, out, progress=not args.quiet, resume=args.resume)
+    with claimed(out, TABLE2, resume=args.resume, own=own):  # checked and locked before JAX starts, until the end
+        _enable_compile_cache()
+        from mjx_protamer.experiments.table2 import run_table2
+
+        try:
+            with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
+                result = run_table2(cfg, out, progress=not args.quiet, resume=args.resume)
+        except OSError as e:  # a full disk, no permission: one line, and what --resume keeps
+            raise _table2_write_failed(e, out, cfg) from None
     print(Path(result["table_md"]).read_text())
     for key in ("table_md", "table_json", "figure1", "figure2", "training_csv"):
         print(f"{key:<13} {result[key]}")
@@ -109,13 +125,33 @@ def _table2(args: argparse.Namespace) -> int:
     return 0
 
 
+def _table2_write_failed(e: OSError, out: Path, cfg):
+    """The one line of a table2 run stopped by a failed write: its checkpoints are the finished conditions."""
+    from mjx_protamer.errors import write_failed
+
+    done = [c.name for c in cfg.conditions if (out / f"condition_{c.name}.json").is_file()]
+    kept = (f"the conditions finished before it are kept ({', '.join(done)}: {out}/condition_<name>.json and "
+            f"their agents)" if done else "no condition had finished yet")
+    return write_failed(e, out, kept, f"continue with `protamer reproduce table2 --resume --out {out}` (the same "
+                                      "--config, --set and --seeds)")
+
+
 def _rescore(args: argparse.Namespace) -> int:
     from mjx_protamer.commands.train import _enable_compile_cache
-    from mjx_protamer.experiments.rescore import rescore_table2
+    from mjx_protamer.config import ConfigError
+    from mjx_protamer.experiments.table2 import load_table2_config
+    from mjx_protamer.outdir import claimed
 
-    _enable_compile_cache()
-    with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
-        result = rescore_table2(args.run, args.config, args.out, args.overrides, progress=not args.quiet)
+    if not (args.run / "config.yaml").is_file():
+        raise ConfigError(f"{args.run / 'config.yaml'} is missing: give the --out directory of a table2 run")
+    load_table2_config(args.config, args.overrides)  # a bad --config or --set: refused before --out is made
+    out = args.out if args.out is not None else args.run / time.strftime("rescore-%Y%m%d-%H%M%S")
+    with claimed(out, RESCORE, resumable=False):
+        _enable_compile_cache()
+        from mjx_protamer.experiments.rescore import rescore_table2
+
+        with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
+            result = rescore_table2(args.run, args.config, out, args.overrides, progress=not args.quiet)
     print(Path(result["table_md"]).read_text())
     for key in ("table_md", "table_json"):
         print(f"{key:<13} {result[key]}")
@@ -123,28 +159,35 @@ def _rescore(args: argparse.Namespace) -> int:
 
 
 def _live(args: argparse.Namespace) -> int:
+    from mjx_protamer.cli_numbers import number
     from mjx_protamer.config import ConfigError
     from mjx_protamer.experiments.live_effect import CHANNELS, Plan, pretrain_checkpoints, run_live_effect
-    from mjx_protamer.live.spec import _number, check_config_file
+    from mjx_protamer.live.spec import check_config_file
+    from mjx_protamer.outdir import claimed, kind_of
 
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip())
     bad = [c for c in channels if c not in CHANNELS]
     if bad or not channels:
         raise ConfigError(f"--channels: {', '.join(bad) or 'none given'}; use keyboard, prosody and/or whisper")
     check_config_file(args.rule_config, "--rule-config")
-    minutes = _number("--minutes", args.minutes, 0.01, 600)
-    episodes = _number("--episodes", args.episodes, 1, 1000, integer=True)
-    parallel = _number("--parallel", args.parallel, 1, 64, integer=True)
-    if args.pretrain_seeds is not None:
-        checkpoints = pretrain_checkpoints(args.out, _number("--pretrain-seeds", args.pretrain_seeds, 2, 1000, True))
-    else:
-        checkpoints = args.checkpoints
-        missing = [c for c in checkpoints if not (Path(c) / "config.yaml").is_file()]
+    minutes = number("--minutes", args.minutes, 0.01, 600)
+    episodes = number("--episodes", args.episodes, 1, 1000, integer=True)
+    parallel = number("--parallel", args.parallel, 1, 64, integer=True)
+    seeds = None if args.pretrain_seeds is None else number("--pretrain-seeds", args.pretrain_seeds, 2, 1000, True)
+    if seeds is None:
+        missing = [c for c in args.checkpoints if not (Path(c) / "config.yaml").is_file()]
         if missing:
             raise ConfigError(f"--checkpoints: {missing[0]} is not a pretrain run directory (no config.yaml)")
-    plan = Plan(tuple(Path(c) for c in checkpoints), args.out, channels, minutes, 250.0, args.rule_config,
-                tuple(args.overrides), episodes, parallel)
-    summary = run_live_effect(plan)
-    print((args.out / "live_effect.md").read_text())
-    print(f"json {args.out / 'live_effect.json'}\nfigure {args.out / 'live_effect.png'}\nwall {summary['wall_s']:.0f} s")
+    # A directory this command wrote before is continued (its finished sessions are kept); anything else must be
+    # new or empty. `own`: what a live-effect directory written before claims existed holds.
+    out = args.out
+    own = ("live_effect.json", "none_0", "checkpoints/seed0")
+    ours = out.is_dir() and (kind_of(out) == LIVE or (kind_of(out) is None and any((out / f).exists() for f in own)))
+    with claimed(out, LIVE, resume=ours, own=own):
+        checkpoints = pretrain_checkpoints(out, seeds) if seeds is not None else args.checkpoints
+        plan = Plan(tuple(Path(c) for c in checkpoints), out, channels, minutes, 250.0, args.rule_config,
+                    tuple(args.overrides), episodes, parallel)
+        summary = run_live_effect(plan)
+    print((out / "live_effect.md").read_text())
+    print(f"json {out / 'live_effect.json'}\nfigure {out / 'live_effect.png'}\nwall {summary['wall_s']:.0f} s")
     return 0

@@ -44,13 +44,16 @@ def register(subparsers) -> None:
     )
     e.add_argument("--checkpoint", type=Path, required=True,
                    help="a pretrain run directory, its checkpoints/ directory, or one checkpoint step in it")
-    e.add_argument("--episodes", type=int, default=10)
-    e.add_argument("--seed", type=int, default=None, help="test-episode seed (default: the run's eval seed)")
+    e.add_argument("--episodes", default=10, help="test episodes (default 10)")
+    e.add_argument("--seed", default=None, help="test-episode seed, 0..2^32-1 (default: the run's eval seed)")
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.add_argument("--body-map", default=None, metavar="FILE.png|none",
                    help="self-touch runs: write a body map (the infant coloured by how often each region was "
                    "touched) there (default: RUN/body_map.png; 'none' to skip)")
     e.set_defaults(handler=_eval)
+
+
+MAX_EPISODES = 10_000  # test episodes of one eval or render: each is a whole rollout held in memory
 
 
 def _enable_compile_cache() -> None:
@@ -94,14 +97,27 @@ def _pretrain(args: argparse.Namespace) -> int:
     feedback = None
     if args.feedback is not None:
         feedback = _feedback_setup(args.feedback, fb_raw, fb_overrides)
-    _enable_compile_cache()
     out = args.out or Path("runs") / time.strftime("pretrain-%Y%m%d-%H%M%S")
+    from mjx_protamer.outdir import claimed
 
-    from mjx_protamer.experiments.pretrain import report, run_pretrain
+    # --out is checked, created and locked before JAX starts, and stays locked until the run ends
+    with claimed(out, KIND, resume=args.resume, own=("config.yaml",)):
+        _enable_compile_cache()
+        from mjx_protamer.errors import write_failed
+        from mjx_protamer.experiments.pretrain import last_good_checkpoint, report, run_pretrain
 
-    result = run_pretrain(config, out, resume=args.resume, progress=not args.no_progress, feedback=feedback)
+        try:
+            result = run_pretrain(config, out, resume=args.resume, progress=not args.no_progress, feedback=feedback)
+        except OSError as e:  # a full disk, no permission: one line, and what --resume continues from
+            good = last_good_checkpoint(out)
+            raise write_failed(e, out, f"the last good checkpoint is {good}" if good else
+                               "no checkpoint had been saved yet", f"continue with `protamer pretrain --resume "
+                               f"--out {out}` (the same --config and --set)" if good else "start again") from None
     print(report(result))
     return 0
+
+
+KIND = "pretrain"  # what outdir.claim records in a pretrain run's directory
 
 
 def _feedback_setup(spec: str, raw: dict, overrides: list[str]):
@@ -146,10 +162,10 @@ def _section(raw: dict, name: str) -> dict:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from mjx_protamer.config import ConfigError
+    from mjx_protamer.cli_numbers import number, seed
 
-    if args.episodes < 1:
-        raise ConfigError(f"--episodes must be >= 1, got {args.episodes}")
+    args.episodes = number("--episodes", args.episodes, 1, MAX_EPISODES, integer=True)
+    args.seed = seed("--seed", args.seed)
     if (args.body_map or "").lower() != "none":
         _prepare_body_map_gl(args.checkpoint)
     _enable_compile_cache()

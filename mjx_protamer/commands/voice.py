@@ -56,6 +56,10 @@ def cmd_listen(args) -> int:
     from audio_frontend.scorers import make_scorer
     from audio_frontend.sources import make_source
 
+    from mjx_protamer.cli_numbers import number
+
+    if args.max_events is not None:
+        args.max_events = number("--max-events", args.max_events, 1, 1e9, integer=True)
     cfg = _load(args)
     try:
         source = make_source(cfg, wav=args.wav, realtime=args.realtime)
@@ -111,7 +115,9 @@ def cmd_calibrate(args) -> int:
     from audio_frontend.calibration import compute_tau, feature_calibration, write_calibration
     from audio_frontend.errors import CalibrationError, VoiceError
     from audio_frontend.labelled import find_labelled, load_labelled
+    from mjx_protamer.cli_numbers import number
 
+    args.n = number("--n", args.n, 1, 1000, integer=True)
     cfg = _load(args)
     out_path = args.out or cfg.prosody.calibration_path
     features = cfg.prosody.kind == "features"
@@ -242,7 +248,13 @@ def _validate_speakers(args, cfg) -> int:
 
 def cmd_synth(args) -> int:
     from audio_frontend.testset import SPEAKERS, make_test_set
+    from mjx_protamer.cli_numbers import number, seed
 
+    args.seed = seed("--seed", args.seed)
+    if args.noise_dbfs is not None:
+        args.noise_dbfs = number("--noise-dbfs", args.noise_dbfs, -120, 0)
+    if args.max_per_group is not None:
+        args.max_per_group = number("--max-per-group", args.max_per_group, 1, 1e6, integer=True)
     speakers = tuple(v.strip() for v in args.speakers.split(",") if v.strip()) if args.speakers else SPEAKERS
     try:
         counts = make_test_set(args.dir, speakers, noise_dbfs=args.noise_dbfs, seed=args.seed,
@@ -263,7 +275,7 @@ def register(subparsers) -> None:
     p.add_argument("--realtime", action="store_true", help="with --wav: play the file at real-time speed")
     p.add_argument("--save-segments", default=None, metavar="DIR", help="save each scored segment as WAV here")
     p.add_argument("--log", default=None, metavar="FILE", help="also append events to this JSONL feedback log")
-    p.add_argument("--max-events", type=int, default=None, help="stop after this many utterances")
+    p.add_argument("--max-events", default=None, help="stop after this many utterances")
     p.add_argument("--uncalibrated", action="store_true",
                    help="prosody.kind=wav2vec2 without calibration (tau = 1); the feature scorer always needs one")
     p.set_defaults(handler=cmd_listen)
@@ -274,7 +286,7 @@ def register(subparsers) -> None:
     _common(p)
     p.add_argument("--wav-dir", default=None, help="labelled recordings: pos/, neg/ and neu/ (or fillers/) subfolders "
                                                    "or pos_*/neg_*/neu_* files")
-    p.add_argument("--n", type=int, default=5, help="samples per sign when recording (default 5)")
+    p.add_argument("--n", default=5, help="samples per sign when recording (default 5)")
     p.add_argument("--out", default=None, help="calibration file (default: prosody.calibration_path)")
     p.add_argument("--user", default="", help="a name stored in the calibration file")
     p.add_argument("--json", action="store_true")
@@ -299,9 +311,9 @@ def register(subparsers) -> None:
                                           "fillers}/*.wav with labels.jsonl. Not real recordings.")
     p.add_argument("dir")
     p.add_argument("--speakers", default=None, help="comma list of espeak-ng voices (default: six en voices)")
-    p.add_argument("--noise-dbfs", type=float, default=None, help="add white noise at this level")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--max-per-group", type=int, default=None, help="keep at most N sentences per tone and kind")
+    p.add_argument("--noise-dbfs", default=None, help="add white noise at this level (dBFS, -120..0)")
+    p.add_argument("--seed", default=0, help="the noise's seed, 0..2^32-1 (default 0)")
+    p.add_argument("--max-per-group", default=None, help="keep at most N sentences per tone and kind")
     p.add_argument("--probe", action="store_true", help="also a probe/ split per speaker: one-word keywords in both "
                                                          "tones and 12 fillers in two styles (the filler gate's test)")
     p.set_defaults(handler=cmd_synth)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from mjx_protamer.config import check
+from mjx_protamer.config import check, check_seed
 from mjx_protamer.envs import body
 from mjx_protamer.envs.body import PhysicsConfig
 
@@ -147,6 +147,7 @@ class EnvConfig:
         check(0 < self.recovery_s <= 600, "recovery_s", f"must be in (0, 600] s, got {self.recovery_s}")
         check(self.freeze_speed > 0, "freeze_speed", f"must be > 0 rad/s, got {self.freeze_speed}")
         check(0 <= self.reset_noise_steps <= 200, "reset_noise_steps", f"must be in [0, 200], got {self.reset_noise_steps}")
+        check_seed(self.reset_pool_seed, "reset_pool_seed")
         check(0 <= self.reset_noise_scale <= 1, "reset_noise_scale", f"must be in [0, 1], got {self.reset_noise_scale}")
         check(1 <= self.reset_pool_size <= 4096, "reset_pool_size", f"must be in [1, 4096], got {self.reset_pool_size}")
 

@@ -20,6 +20,7 @@ the next chunk must not start before the save ends.
 
 from __future__ import annotations
 
+import errno
 import gc
 import hashlib
 import json
@@ -140,9 +141,18 @@ def _check_files(manifest: dict, directory: Path) -> None:
 
 
 def save(mngr: ocp.CheckpointManager, step: int, state) -> None:
+    """Save `state` as `step` (arrays by orbax, then the manifest). A write that fails (a full disk, no
+    permission) raises OSError naming the path; orbax's and tensorstore's own errors for it (e.g.
+    RESOURCE_EXHAUSTED) are turned into one, so callers report every failed save the same way."""
     named = named_leaves(state)
-    mngr.save(step, args=ocp.args.StandardSave(_nested(named)))
-    mngr.wait_until_finished()
+    try:
+        mngr.save(step, args=ocp.args.StandardSave(_nested(named)))
+        mngr.wait_until_finished()
+    except OSError:
+        raise
+    except Exception as e:  # orbax/tensorstore wrap the file system's errors in their own types
+        first = str(e).strip().splitlines()[0][:200] if str(e).strip() else type(e).__name__
+        raise OSError(errno.EIO, f"the checkpoint could not be written ({first})", str(step_dir(mngr, step))) from e
     host = {name: np.asarray(jax.device_get(x)) for name, x in named.items()}
     manifest = {"format": FORMAT, "step": int(step), "leaves": _describe(host), "sha256": _digest(host),
                 "files": _file_digests(step_dir(mngr, step))}

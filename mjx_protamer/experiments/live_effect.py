@@ -130,15 +130,14 @@ def scorer(checkpoint: Path, rule_config, episodes: int):
 
 def _session_facts(out: Path) -> dict:
     """What a finished session itself reports: events, updates per shown step, the speaker's delivery."""
-    facts: dict = {}
+    manifest = json.loads((out / "session.json").read_text())
+    pace = (manifest.get("measured_pace") or [{}])[-1]
+    facts: dict = {"updates_per_step": pace.get("updates_per_step"), "realtime": pace.get("realtime")}
     log = out.with_suffix(".log")
     if log.is_file():
         for line in log.read_text(errors="replace").splitlines():
             if line.startswith("[finetune] saved in"):
-                part = line.split(": ", 1)[1]
-                facts["events"] = int(part.split(" events")[0])
-                if "updates per shown step" in part:
-                    facts["updates_per_step"] = float(part.rsplit(", ", 1)[1].split()[0])
+                facts["events"] = int(line.split(": ", 1)[1].split(" events")[0])
     speaker = out / "speaker.jsonl"
     if speaker.is_file():
         last = speaker.read_text().strip().splitlines()[-1]

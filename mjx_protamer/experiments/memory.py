@@ -70,3 +70,20 @@ def check_fits(state_like, devices, replay_like=None, replay_size: int | None = 
         hint = (f"lower ddpg.replay_size (about {fit:,} would fit here)" if fit > 0
                 else "lower train.num_envs and ddpg.replay_size")
     raise OutOfMemoryEstimate(f"{msg}, {HEADROOM}x of which must be free, but {_gb(free)} is available; {hint}")
+
+
+def check_seeds_fit(parts: dict[str, int], seeds: int, devices, what: str, hint: str) -> int:
+    """Raise OutOfMemoryEstimate unless `seeds` copies of a run side by side fit (`parts`: bytes per seed by what
+    holds them, e.g. {"learner state and replay": ..., "feedback state": ...}) in `available_bytes(devices)` with
+    HEADROOM; return the estimated bytes. The message says how many seeds would fit and what else to lower."""
+    per_seed = sum(parts.values())
+    need = per_seed * seeds
+    free = available_bytes(devices)
+    if need * HEADROOM <= free:
+        return need
+    fit = int(free / HEADROOM // per_seed) if per_seed else 0
+    shown = ", ".join(f"{name} {_gb(n)}" for name, n in parts.items() if n)
+    lower = f"lower --seeds (about {fit:,} would fit here)" if fit >= 1 else "no single seed fits here"
+    raise OutOfMemoryEstimate(f"{what} for {seeds:,} seeds needs about {_gb(need)} ({_gb(per_seed)} per seed: "
+                              f"{shown}), {HEADROOM}x of which must be free, but {_gb(free)} is available; "
+                              f"{lower}, or {hint}")

@@ -133,10 +133,18 @@ def run_pretrain(
             post.update(fb=f"{row['feedback_total']:.0f}", rhat=f"{row['r_hat_mean']:+.2f}")
         return post
 
-    run = runner.run_chunks(step, parts, tc.num_chunks, tc.chunk_steps * tc.num_envs, start=start,
-                            max_chunks=max_chunks, progress_fn=progress_fn, log=log,
-                            term_names=env.reward_term_names, checkpointer=ckpt,
-                            bar="pretrain" if progress else None, postfix=postfix)
+    try:
+        run = runner.run_chunks(step, parts, tc.num_chunks, tc.chunk_steps * tc.num_envs, start=start,
+                                max_chunks=max_chunks, progress_fn=progress_fn, log=log,
+                                term_names=env.reward_term_names, checkpointer=ckpt,
+                                bar="pretrain" if progress else None, postfix=postfix)
+    except BaseException:  # a failed write, a kill: close what is open (quietly: the disk may be full), re-raise
+        for closer in (log.close, ckpt.close) + ((fb_log.close,) if fb is not None else ()):
+            try:
+                closer()
+            except Exception:
+                pass
+        raise
     state, chunk = run.state[0], run.chunks_done
     if fb is not None:
         fb_state = run.state[1]
@@ -186,6 +194,21 @@ def run_pretrain(
         result["eval_json"] = str(out / "eval.json")
     ckpt.close()
     return result
+
+
+def last_good_checkpoint(out: str | Path) -> Path | None:
+    """The newest checkpoint step of the run in `out` whose every part (checkpoints/, and checkpoints_feedback/
+    and checkpoints_selected/ where the run has them) finished its save (has its manifest): where `--resume`
+    continues from after a failed write. None when there is none."""
+    out = Path(out)
+    parts = [out / "checkpoints"] + [out / d for d in ("checkpoints_feedback", SELECTED_DIR) if (out / d).is_dir()]
+    steps = set(checkpoints.available_steps(parts[0]))
+    for d in parts[1:]:
+        steps &= set(checkpoints.available_steps(d))
+    for step in sorted(steps, reverse=True):
+        if all((d / str(step) / checkpoints.MANIFEST).is_file() for d in parts):
+            return parts[0] / str(step)
+    return None
 
 
 def report(result: dict) -> str:

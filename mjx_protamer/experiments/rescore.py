@@ -63,7 +63,7 @@ def rescore_table2(run, rule_config=None, out=None, overrides=None, progress: bo
     pre = cfg.pretrain
     env = make_env(pre)
     ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)  # a rule signal this env lacks: ConfigError
-    untrained = jax.jit(jax.vmap(ft.init))(np.asarray(cfg.seeds, np.int32)).rm_params
+    untrained = jax.jit(jax.vmap(ft.init))(np.asarray(cfg.seeds, np.uint32)).rm_params
     evaluate = make_seed_evaluator(cfg, env, ft)
     evals, wall, reward_models, samples = {}, {}, {}, {}
     for name in names:

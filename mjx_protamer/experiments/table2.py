@@ -39,7 +39,7 @@ import numpy as np
 
 from mjx_protamer.agents.ddpg import selection
 from mjx_protamer.agents.ddpg.config import PretrainConfig
-from mjx_protamer.config import ConfigError, check, to_dict
+from mjx_protamer.config import ConfigError, check, check_seed, to_dict
 from mjx_protamer.experiments import metrics as M
 from mjx_protamer.experiments.evaluate import validation_seed
 from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, human_reward, make_feedback_train
@@ -89,6 +89,8 @@ class Table2Config:
         names = [c.name for c in self.conditions]
         check(len(set(names)) == len(names), "conditions", f"names must be unique, got {names}")
         check(len(self.seeds) >= 1, "seeds", "needs at least one seed")
+        for i, seed in enumerate(self.seeds):
+            check_seed(seed, f"seeds[{i}]")
         check(self.moving_average >= 1, "moving_average", f"must be >= 1, got {self.moving_average}")
 
 
@@ -144,27 +146,34 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
     out = Path(out_dir)
     import yaml
 
-    saved = yaml.safe_dump(to_dict(cfg), sort_keys=False)
     done = {c.name: out / f"condition_{c.name}.json" for c in cfg.conditions}
     if resume:
         if not (out / "config.yaml").is_file():
             raise ConfigError(f"--resume: {out} holds no table2 run to continue; leave out --resume to start one there")
-        if (out / "config.yaml").read_text() != saved:
-            raise ConfigError(f"--resume: the config differs from the one saved in {out / 'config.yaml'}")
     elif any(p.is_file() for p in done.values()):
         raise ConfigError(f"{out} already holds a table2 run; pass --resume to continue it, or another --out")
-    out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "config.yaml", saved)
     pre = cfg.pretrain
     tc = pre.train
     env = make_env(pre)
     t_all = time.perf_counter()
     ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)
+    # Every seed's state side by side, and what the run keeps of every condition: refused before allocating
+    from mjx_protamer.agents.ddpg.train import resolve_devices
+    from mjx_protamer.experiments import memory
+
+    memory.check_seeds_fit(memory_per_seed(cfg, env, ft), len(cfg.seeds), resolve_devices(tc.num_devices),
+                           f"reproduce table2 ({len(cfg.conditions)} conditions, one at a time)",
+                           "lower ddpg.replay_size, train.num_envs or train.eval_episodes")
+    saved = yaml.safe_dump(to_dict(cfg), sort_keys=False)
+    if resume and (out / "config.yaml").read_text() != saved:
+        raise ConfigError(f"--resume: the config differs from the one saved in {out / 'config.yaml'}")
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "config.yaml", saved)
     training: list[dict] = []
     evals: dict[str, dict[int, dict]] = {c.name: {} for c in cfg.conditions}
     wall: dict[str, list[float]] = {c.name: [] for c in cfg.conditions}
     # Seeds run side by side in one program: init, every chunk and the test episodes are vmapped over them.
-    seeds = np.asarray(cfg.seeds, np.int32)
+    seeds = np.asarray(cfg.seeds, np.uint32)  # any seed in 0..2^32-1 (the same keys as int32 below 2^31)
     keys = jax.vmap(jax.random.PRNGKey)(seeds)
     init = jax.jit(jax.vmap(ft.trainer.init))
     init_feedback = jax.jit(jax.vmap(ft.init))
@@ -270,6 +279,29 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
             "wall_s": total_s, "summary": summary}
 
 
+def memory_per_seed(cfg: Table2Config, env, ft) -> dict[str, int]:
+    """Bytes one seed of a table2 run holds at its peak, by part, from abstract shapes (`jax.eval_shape`: nothing
+    is allocated): the learner's state with its replay and the feedback state of the condition training now
+    (conditions run one after another), the kept snapshot (train.select_every_chunks), the test episodes' signals
+    and env states, and what the run keeps of every condition until the end (reward models, sampled test
+    states)."""
+    from mjx_protamer.experiments.memory import tree_bytes
+
+    pre = cfg.pretrain
+    tc = pre.train
+    key = jax.random.PRNGKey(0)
+    learner = jax.eval_shape(ft.trainer.init, key)
+    feedback = jax.eval_shape(ft.init, jnp.uint32(0))
+    episodes, steps = tc.eval_episodes, tc.episode_length
+    floats = env.observation_size + env.action_size + len(env.reward_term_names) + 8 + 3  # a step's signals
+    test = episodes * (steps * (floats + 3) * 4 + tree_bytes(jax.eval_shape(env.reset, key)))
+    sampled = episodes * (-(-steps // STATE_STRIDE)) * (env.observation_size + env.action_size + 1) * 4
+    return {"learner state and replay": tree_bytes(learner), "feedback state": tree_bytes(feedback),
+            "kept snapshot": tree_bytes(learner.actor_params) if tc.select_every_chunks > 0 else 0,
+            "test episodes": test,
+            "kept per condition": len(cfg.conditions) * (tree_bytes(feedback.rm_params) + sampled)}
+
+
 def _corr(x: np.ndarray, y: np.ndarray) -> float | None:
     """Pearson correlation; None where either side is constant (no variation to track)."""
     x, y = x - x.mean(), y - y.mean()
@@ -291,9 +323,16 @@ def _save_condition_models(out: Path, name: str, rm_params, states: dict, agents
 
     from mjx_protamer.experiments import checkpoints
 
-    mngr = checkpoints.manager(out / "reward_models" / name, max_to_keep=1)
-    checkpoints.save(mngr, 0, jax.device_get(rm_params))
-    checkpoints.save(checkpoints.manager(out / "agents" / name, max_to_keep=1), 0, jax.device_get(agents))
+    import shutil
+
+    for path, tree in ((out / "reward_models" / name, rm_params), (out / "agents" / name, agents)):
+        if (path / "0").exists():  # from an attempt at this condition that did not finish (a kill, a full disk)
+            shutil.rmtree(path / "0")
+        mngr = checkpoints.manager(path, max_to_keep=1)
+        try:
+            checkpoints.save(mngr, 0, jax.device_get(tree))
+        finally:
+            mngr.close()
     buf = io.BytesIO()
     np.savez_compressed(buf, **states)
     checkpoints.write_atomic(out / f"test_states_{name}.npz", buf.getvalue())

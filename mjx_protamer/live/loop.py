@@ -52,6 +52,16 @@ class LoopResult:
     chunks: int = 0
     interrupted: bool = False
     write_error: str | None = None
+    t_ready: float | None = None  # when the first chunk had run (the sources started)
+    t_end: float | None = None
+
+    def pace(self, shown_s: float) -> dict:
+        """The shown chunks after the first against the wall time they took (real time: 1.0)."""
+        if self.t_ready is None or self.chunks < 2:
+            return {"chunks": self.chunks}
+        wall = self.t_end - self.t_ready
+        shown = (self.chunks - 1) * shown_s
+        return {"chunks": self.chunks, "shown_s": shown, "wall_s": wall, "realtime": shown / max(wall, 1e-9)}
 
 
 def run_loop(spec, learner, sources, sinks, pacer, clock, stopper: Stopper, autosave, on_ready) -> LoopResult:
@@ -65,6 +75,7 @@ def run_loop(spec, learner, sources, sinks, pacer, clock, stopper: Stopper, auto
     t_end = math.inf  # --seconds counts from the first chunk shown: compiles and model loads do not
     last_save = time.time()
     slow_said = False
+    t_next = None  # when the next chunk is due to be shown (paced)
     try:
         while time.time() < t_end and stopper.signum is None:
             if spec.max_chunks and result.chunks >= spec.max_chunks:
@@ -93,6 +104,7 @@ def run_loop(spec, learner, sources, sinks, pacer, clock, stopper: Stopper, auto
                 if stopper.signum is not None:
                     break
                 on_ready()
+                result.t_ready = time.time()
                 if spec.seconds > 0:
                     t_end = time.time() + spec.seconds
             if spec.autosave_s > 0 and time.time() - last_save >= spec.autosave_s:
@@ -109,8 +121,9 @@ def run_loop(spec, learner, sources, sinks, pacer, clock, stopper: Stopper, auto
             pacer.observe(base_s=(t_a - t_start) + (time.time() - t_b), extra=extra, extra_s=t_b - t_a)
             if finished:  # a recording is over: its last events were drained with this chunk
                 break
-            if paced:  # show the chunk at real-time pace
-                spare = t_start + shown_s - time.time()
+            if paced:  # show the chunks at real-time pace: each on a fixed schedule, so jitter does not add up
+                t_next = shown_s + (t_next if t_next is not None and t_next > t_start - shown_s else t_start)
+                spare = t_next - time.time()
                 if spare > 0:
                     time.sleep(spare)
                 elif result.chunks > 1 and not slow_said and shown_s / (time.time() - t_start) < 0.95:
@@ -124,4 +137,5 @@ def run_loop(spec, learner, sources, sinks, pacer, clock, stopper: Stopper, auto
     except WriteFailed as e:
         result.write_error = str(e)
     result.interrupted = result.interrupted or stopper.signum is not None
+    result.t_end = time.time()
     return result

@@ -187,8 +187,13 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
     if write_error is not None:
         return _fail(write_error, 1)
     s = learner.status()
+    pace = {**result.pace(learner.chunk_steps * learner.dt), "segment": segment, "paced": pacer.paced,
+            "updates_per_step": pacer.updates_per_step() if learner.kind == "ddpg" else None}
+    _record_pace(spec.out, pace)
+    ups = f", {pace['updates_per_step']:.2f} updates per shown step" if pace["updates_per_step"] is not None else ""
+    rt = f", {pace['realtime']:.2f}x real time" if "realtime" in pace else ""
     print(f"[finetune] saved in {spec.out}: {s['events']} events{' since the resume' if segment else ''}, queue "
-          f"{learner.queue.stats()}, {pacer.updates_per_step():.2f} updates per shown step", flush=True)
+          f"{learner.queue.stats()}{ups}{rt}", flush=True)
     if spec.calibrate is not None:  # the session is saved whatever the fit says
         from mjx_protamer.commands.reaction_delay import measure
 
@@ -211,6 +216,15 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         print(f"[finetune] exit code {code}: the session is saved, its reaction delay could not be fitted (above)",
               flush=True)
     return code
+
+
+def _record_pace(out: Path, pace: dict) -> None:
+    """session.json keeps each segment's measured pace (`measured_pace`): real-time factor, updates per shown step."""
+    from mjx_protamer.live.record import MANIFEST, read_manifest, write_json_atomic
+
+    manifest = read_manifest(out)
+    manifest.setdefault("measured_pace", []).append(pace)
+    write_json_atomic(out / MANIFEST, manifest)
 
 
 def _clock(spec: SessionSpec):

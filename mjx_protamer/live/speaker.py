@@ -94,6 +94,7 @@ class SimulatedSpeaker(Source):
         self.path = spec.out / "speaker.jsonl"
         self.meant: dict[int, dict] = {}  # command id -> what the speaker meant, then what was said
         self.events: list = []  # every feedback event the learner drained
+        self.credits: list = []  # for each, (first, last) step its credit covered, or None
         self.busy_until = -np.inf
         self.held_back = 0
         self._next_id = 0
@@ -125,7 +126,11 @@ class SimulatedSpeaker(Source):
         self._read_spoken()
 
     def drained(self, outcomes) -> None:
-        self.events.extend(o.event for o in outcomes if o.event.source != "attention")
+        for o in outcomes:
+            if o.event.source != "attention":
+                self.events.append(o.event)
+                steps = getattr(o.got, "steps", None)  # a DDPG credit: the steps it credited
+                self.credits.append((min(steps), max(steps)) if steps else None)
 
     def _read_spoken(self) -> None:
         while True:
@@ -183,26 +188,34 @@ class SimulatedSpeaker(Source):
                 e = self.events[match]
                 arrival = e.t_end + float(e.details.get("latency_s", 0.0))
                 row.update(outcome="delivered", value=e.value, sign_right=bool(np.sign(e.value) == m["sign"]),
-                           latency_s=arrival - m["t_end"], transcript=e.details.get("transcript"))
+                           latency_s=arrival - m["t_end"], transcript=e.details.get("transcript"),
+                           credited=self.credits[match])
+                if self.credits[match] is not None:
+                    lo, hi = self.credits[match]
+                    row["credit_covers_meant_step"] = bool(lo <= m["about_step"] <= hi)
             rows.append(row)
         stray = [e for i, e in enumerate(self.events) if i not in used and e.value != 0]
         said = [r for r in rows if "t_start" in r]
         got = [r for r in said if r["outcome"] == "delivered"]
         signed = [r for r in got if r["value"] != 0]
+        covers = [r["credit_covers_meant_step"] for r in got if "credit_covers_meant_step" in r]
         summary = {"meant": len(rows), "said": len(said), "delivered": len(got), "missed": len(said) - len(got),
                    "held_back": self.held_back,
                    "sign_accuracy": float(np.mean([r["sign_right"] for r in signed])) if signed else None,
                    "zero_valued": len(got) - len(signed),
                    "latency_s_median": float(np.median([r["latency_s"] for r in got])) if got else None,
+                   "credit_covers_meant_step": float(np.mean(covers)) if covers else None,
                    "stray_events": len(stray)}
         with open(self.path, "w", encoding="utf-8") as fh:
             for r in rows:
                 fh.write(json.dumps(r, sort_keys=True) + "\n")
             fh.write(json.dumps({"summary": summary}, sort_keys=True) + "\n")
         acc = "-" if summary["sign_accuracy"] is None else f"{summary['sign_accuracy']:.2f}"
+        cov = "-" if summary["credit_covers_meant_step"] is None else f"{summary['credit_covers_meant_step']:.2f}"
         lat = "-" if summary["latency_s_median"] is None else f"{summary['latency_s_median']:.2f} s"
         print(f"[speaker] said {summary['said']} of {summary['meant']} meant ({self.held_back} held back while "
               f"speaking); delivered {summary['delivered']}, missed {summary['missed']}, sign accuracy {acc}, "
-              f"{summary['zero_valued']} scored 0, latency from the end of the words {lat} (median); "
+              f"{summary['zero_valued']} scored 0, latency from the end of the words {lat} (median); credit "
+              f"covers the meant step for {cov} of the credited; "
               f"{summary['stray_events']} stray events; {self.path}", flush=True)
         return summary

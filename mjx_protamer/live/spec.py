@@ -10,11 +10,11 @@ replayed session runs the settings it was started with, whatever the flags say.
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from pathlib import Path
 
-from mjx_protamer.config import ConfigError, to_dict
+from mjx_protamer.cli_numbers import number as _number  # noqa: F401  (commands import it from here)
+from mjx_protamer.config import MAX_CONFIG_BYTES, ConfigError, check_config_size, to_dict  # noqa: F401
 from mjx_protamer.human.feedback_config import SESSION_DDPG_KEYS, FeedbackRunConfig, load_feedback_config
 
 LIVE = ("keyboard", "prosody", "whisper", "web")
@@ -24,19 +24,6 @@ LEARNERS = ("ddpg", "coach")
 # A session's feedback config without --config (the channel follows --feedback: the shipped files differ in it
 # alone). Without it a session would run the dataclass defaults: an unbounded reward model, no silences, beta 0.1.
 DEFAULT_FEEDBACK_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "feedback_keyboard.yaml"
-MAX_CONFIG_BYTES = 1 << 20  # a config file larger than this is refused before parsing (issue 42)
-
-
-def _number(name: str, value, lo: float, hi: float, integer: bool = False):
-    """A command-line number checked like a config value: finite and within [lo, hi]."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise ConfigError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or not lo <= x <= hi or (integer and x != int(x)):
-        kind = "a whole number" if integer else "a number"
-        raise ConfigError(f"{name} must be {kind} within {lo:g}..{hi:g}, got {value!r}")
-    return int(x) if integer else x
 
 
 def check_config_file(path: Path | None, flag: str = "--config") -> None:
@@ -45,9 +32,7 @@ def check_config_file(path: Path | None, flag: str = "--config") -> None:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{flag} {p}: no such file (a feedback YAML such as configs/feedback_keyboard.yaml)")
-    if p.stat().st_size > MAX_CONFIG_BYTES:
-        raise ConfigError(f"{flag} {p} is {p.stat().st_size / 2**20:.0f} MiB; a config is a few KiB (the limit is "
-                          f"{MAX_CONFIG_BYTES // 2**20} MiB): is it the right file?")
+    check_config_size(p, flag)  # the config loader's own limit (config.MAX_CONFIG_BYTES)
 
 
 def channel_kind(feedback: str) -> str | None:

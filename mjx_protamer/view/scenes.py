@@ -34,13 +34,12 @@ def step_seconds(run_config) -> float:
 def prepare_gl_for(checkpoint) -> str | None:
     """Before JAX starts its threads (the probe runs child processes): choose the OpenGL backend when the
     run at `checkpoint` is a self-touch run. Returns the backend, or None for a toy run."""
-    import yaml
-
+    from mjx_protamer.config import read_raw
     from mjx_protamer.experiments.run_loader import CONFIG_NAME, resolve_checkpoint
     from mjx_protamer.view.gl import choose_backend
 
     run_dir = resolve_checkpoint(checkpoint)[0]
-    raw = yaml.safe_load((run_dir / CONFIG_NAME).read_text()) or {}
+    raw = read_raw(run_dir / CONFIG_NAME)  # the one loader: its size limit and one-line errors
     if raw.get("env_name") == "toy":
         return None
     return choose_backend()

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from mjx_protamer.config import check
+from mjx_protamer.config import check, check_seed
 from mjx_protamer.envs.config import EnvConfig
 from mjx_protamer.envs.toy import ToyEnvConfig
 
@@ -123,6 +123,7 @@ class TrainConfig:
     select_episodes: int = 4
 
     def validate(self) -> None:
+        check_seed(self.seed, "seed")
         check(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
         check(self.episode_length >= 1, "episode_length", f"must be >= 1, got {self.episode_length}")
         check(self.total_env_steps >= self.num_envs, "total_env_steps",
