@@ -5,7 +5,8 @@ reads `configs/*.yaml`, applies `a.b.c=value` overrides from the command line an
 dataclass, refusing unknown keys, wrong types and values outside the allowed range. Field-level
 rules live next to the fields, in each dataclass's `validate()` method, which raises
 `ConfigError` through `check()`; one rule holds for every field here: a float is finite (NaN or inf in
-any weight, rate or threshold would silently turn training into NaN).
+any weight, rate or threshold would silently turn training into NaN). A file over MAX_CONFIG_BYTES is refused
+before it is read, and every seed field is a uint32 (`check_seed`).
 
 YAML is read as YAML 1.2 reads numbers: `1e-4` is a float (PyYAML's YAML 1.1 resolver wants `1.0e-4`
 and returns the string '1e-4' otherwise).

@@ -5,7 +5,8 @@ A command writes only into a directory that is new, empty, or of its own kind wh
 exclusive lock (`fcntl.flock` on `.protamer.lock`, held for the life of the run and released by the kernel
 when the process dies, kill -9 included), and a probe file is written and removed, so an unwritable path
 fails in a second, not after minutes of loading. Each claimed directory holds `.protamer.json`: the kind of
-run that owns it. Pure Python (no JAX).
+run that owns it. `claimed(...)` holds a claim for a `with` block; a run that fails there before writing anything
+leaves the directory as it was found (`Claim.abandon`). Pure Python (no JAX).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ class Claim:
         self.path = path
         self._fd = fd
         self._created = created  # what the claim itself made: "dir", LOCK, MARK
+        self._found = _listing(path)  # what was there (names, sizes, times), to tell whether a run wrote anything
 
     def release(self) -> None:
         if self._fd >= 0:
@@ -49,14 +51,10 @@ class Claim:
             self._fd = -1
 
     def abandon(self) -> None:
-        """Release after a run that ended before writing anything (a refused config, not enough memory): the
-        directory is left as it was found, without the mark, lock or directory the claim made. A directory the
-        run wrote into keeps everything."""
-        try:
-            left = [p for p in self.path.iterdir() if p.name not in (LOCK, MARK)]
-        except OSError:
-            left = [None]
-        if not left and self._fd >= 0:
+        """Release after a run that ended before writing anything (a refused config, not enough memory, a
+        directory of another kind that a `--resume` looked at): it is left as it was found, without the mark,
+        lock or directory the claim made. A directory the run wrote into keeps everything, the mark included."""
+        if self._fd >= 0 and _listing(self.path) == self._found:
             for name in (MARK, LOCK):
                 if name in self._created:
                     (self.path / name).unlink(missing_ok=True)
@@ -66,6 +64,14 @@ class Claim:
                 except OSError:
                     pass
         self.release()
+
+
+def _listing(path: Path) -> dict | None:
+    """The directory's own entries (not the claim's files) with their sizes and modification times."""
+    try:
+        return {p.name: (p.stat().st_size, p.stat().st_mtime_ns) for p in path.iterdir() if p.name not in (LOCK, MARK)}
+    except OSError:
+        return None
 
 
 def kind_of(path: str | Path) -> str | None:

@@ -33,7 +33,8 @@ def register(subparsers) -> None:
                    "earlier head rule without habituation, configs/table2_paper.yaml the paper's single-env "
                    "20-episode setting)")
     t.add_argument("--seeds", default=None, help="run seeds 0..N-1 (default: the config's seeds)")
-    t.add_argument("--out", type=Path, default=None, help="output directory (default: runs/table2-<time>)")
+    t.add_argument("--out", type=Path, default=None, help="output directory: new or empty, or with --resume the run "
+                   "to continue; locked while the run runs (default: runs/table2-<time>)")
     t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set pretrain.train.total_env_steps=32000 (repeatable)")
     t.add_argument("--backend", choices=("auto", "mjx", "native"), default=None,
@@ -57,7 +58,8 @@ def register(subparsers) -> None:
                    "default's lateral rule), e.g. configs/table2_tour_right.yaml")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a value of --config, e.g. --set 'feedback.teacher.rule=[...]' (repeatable)")
-    r.add_argument("--out", type=Path, default=None, help="output directory (default: RUN/rescore-<time>)")
+    r.add_argument("--out", type=Path, default=None, help="output directory, new or empty (default: "
+                   "RUN/rescore-<time>)")
     r.add_argument("--quiet", action="store_true", help="no per-condition progress lines")
     r.set_defaults(handler=_rescore)
     v = sub.add_parser(
@@ -150,8 +152,14 @@ def _rescore(args: argparse.Namespace) -> int:
         _enable_compile_cache()
         from mjx_protamer.experiments.rescore import rescore_table2
 
-        with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
-            result = rescore_table2(args.run, args.config, out, args.overrides, progress=not args.quiet)
+        try:
+            with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
+                result = rescore_table2(args.run, args.config, out, args.overrides, progress=not args.quiet)
+        except OSError as e:  # a full disk, no permission: one line
+            from mjx_protamer.errors import write_failed
+
+            raise write_failed(e, out, f"the run {args.run} is untouched", "rescore it again into a new --out") \
+                from None
     print(Path(result["table_md"]).read_text())
     for key in ("table_md", "table_json"):
         print(f"{key:<13} {result[key]}")
@@ -184,10 +192,16 @@ def _live(args: argparse.Namespace) -> int:
     own = ("live_effect.json", "none_0", "checkpoints/seed0")
     ours = out.is_dir() and (kind_of(out) == LIVE or (kind_of(out) is None and any((out / f).exists() for f in own)))
     with claimed(out, LIVE, resume=ours, own=own):
-        checkpoints = pretrain_checkpoints(out, seeds) if seeds is not None else args.checkpoints
-        plan = Plan(tuple(Path(c) for c in checkpoints), out, channels, minutes, 250.0, args.rule_config,
-                    tuple(args.overrides), episodes, parallel)
-        summary = run_live_effect(plan)
+        try:
+            checkpoints = pretrain_checkpoints(out, seeds) if seeds is not None else args.checkpoints
+            plan = Plan(tuple(Path(c) for c in checkpoints), out, channels, minutes, 250.0, args.rule_config,
+                        tuple(args.overrides), episodes, parallel)
+            summary = run_live_effect(plan)
+        except OSError as e:  # a full disk, no permission: one line
+            from mjx_protamer.errors import write_failed
+
+            raise write_failed(e, out, "the sessions finished before it are kept (their directories hold DONE)",
+                               "run the same command again: it continues") from None
     print((out / "live_effect.md").read_text())
     print(f"json {out / 'live_effect.json'}\nfigure {out / 'live_effect.png'}\nwall {summary['wall_s']:.0f} s")
     return 0

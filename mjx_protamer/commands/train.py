@@ -21,7 +21,8 @@ def register(subparsers) -> None:
                    help="YAML config (default: the built-in batched default, configs/pretrain.yaml)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set train.num_envs=64 (repeatable)")
-    p.add_argument("--out", type=Path, default=None, help="run directory (default: runs/pretrain-<time>)")
+    p.add_argument("--out", type=Path, default=None, help="run directory: new or empty, or with --resume the run to "
+                   "continue; locked while the run runs (default: runs/pretrain-<time>)")
     p.add_argument("--backend", choices=("auto", "mjx", "native"), default=None,
                    help="physics backend (the same as --set env.backend=...): native MuJoCo on a CPU, MJX on "
                    "an accelerator; auto (the default) picks by JAX's device")
@@ -110,9 +111,11 @@ def _pretrain(args: argparse.Namespace) -> int:
             result = run_pretrain(config, out, resume=args.resume, progress=not args.no_progress, feedback=feedback)
         except OSError as e:  # a full disk, no permission: one line, and what --resume continues from
             good = last_good_checkpoint(out)
-            raise write_failed(e, out, f"the last good checkpoint is {good}" if good else
-                               "no checkpoint had been saved yet", f"continue with `protamer pretrain --resume "
-                               f"--out {out}` (the same --config and --set)" if good else "start again") from None
+            if good is None:
+                raise write_failed(e, out, "no checkpoint had been saved yet",
+                                   "start again with a new or empty --out") from None
+            raise write_failed(e, out, f"the last good checkpoint is {good}", f"continue with `protamer pretrain "
+                               f"--resume --out {out}` (the same --config and --set)") from None
     print(report(result))
     return 0
 

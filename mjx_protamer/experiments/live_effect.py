@@ -246,7 +246,8 @@ def markdown(summary: dict) -> str:
 
 
 def figure(summary: dict, path: Path) -> None:
-    """Per checkpoint: the teacher score at the start, without feedback and with each channel; pooled means."""
+    """Per checkpoint (grey) the teacher score and the freeze ratio at the start, without feedback and with each
+    channel; the means with their 95% CI; the paired difference to no feedback written under each channel."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -254,20 +255,27 @@ def figure(summary: dict, path: Path) -> None:
 
     rows = summary["per_checkpoint"]
     arms = ["start", "none", *summary["paired"]]
-    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(arms), 4.2))
     x = np.arange(len(arms))
-    for r in rows:
-        ax.plot(x, [r[a]["teacher_score"] for a in arms], color="0.75", lw=0.8, marker="o", ms=3, zorder=1)
-    for i, a in enumerate(arms):
-        st = summary["pooled"][a]["teacher_score"]
-        ax.errorbar(i, st["mean"], yerr=st["ci95"] or 0, color="C3" if a not in ("start", "none") else "k",
-                    marker="s", ms=7, capsize=5, lw=2, zorder=2)
-    ax.set_xticks(x, arms)
-    ax.axhline(0, color="0.6", lw=0.5)
-    ax.set_ylabel("teacher score (hidden rule, test episodes)")
+    fig, axes = plt.subplots(1, 2, figsize=(2.5 + 2.2 * len(arms), 4.2))
+    for ax, metric, lim in zip(axes, ("teacher_score", "freeze_ratio"), ((-1.05, 1.05), (-0.02, 1.02))):
+        for r in rows:
+            ax.plot(x, [r[a][metric] for a in arms], color="0.75", lw=0.8, marker="o", ms=3, zorder=1)
+        for i, a in enumerate(arms):
+            st = summary["pooled"][a][metric]
+            ax.errorbar(i, st["mean"], yerr=st["ci95"] or 0, color="k" if a in ("start", "none") else "C3",
+                        marker="s", ms=7, capsize=5, lw=2, zorder=2)
+        labels = []
+        for a in arms:
+            pr = summary["paired"].get(a, {}).get(metric, {}).get("paired")
+            labels.append(a if not pr or pr["ci95"] is None else f"{a}\n{pr['mean']:+.2f} ± {pr['ci95']:.2f}")
+        ax.set_xticks(x, labels, fontsize=8)
+        ax.set_ylim(*lim)
+        ax.axhline(0, color="0.6", lw=0.5)
+        ax.set_ylabel({"teacher_score": "teacher score (hidden rule, test episodes)",
+                       "freeze_ratio": "freeze ratio (test episodes)"}[metric])
     plan = summary["plan"]
-    ax.set_title(f"{len(rows)} checkpoints, {plan['minutes']:g} min sessions; mean ± 95% CI, grey: per checkpoint",
-                 fontsize=9)
+    fig.suptitle(f"{len(rows)} checkpoints, {plan['minutes']:g} min sessions: mean ± 95% CI; grey, per checkpoint; "
+                 "under a channel: paired difference to no feedback", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -57,7 +57,7 @@ def run_pretrain(
     if resume:
         if not existing:
             raise ConfigError(f"--resume: {out} holds no checkpoint to continue from; leave out --resume to "
-                              f"start a new run there, or give the --out of the run to continue")
+                              f"start a new run (in a new or empty --out), or give the --out of the run to continue")
         if config_path.is_file() and read_raw(config_path) != saved:
             raise ConfigError(f"--resume: the config differs from the one saved in {config_path}")
     elif existing:

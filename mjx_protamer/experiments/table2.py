@@ -320,10 +320,9 @@ def _save_condition_models(out: Path, name: str, rm_params, states: dict, agents
     test episodes ran, for rendering, fine-tuning or diagnosis, e.g. scripts/freeze_anatomy.py) and its
     sampled test states."""
     import io
+    import shutil
 
     from mjx_protamer.experiments import checkpoints
-
-    import shutil
 
     for path, tree in ((out / "reward_models" / name, rm_params), (out / "agents" / name, agents)):
         if (path / "0").exists():  # from an attempt at this condition that did not finish (a kill, a full disk)

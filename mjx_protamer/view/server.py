@@ -9,6 +9,12 @@ when it connects and whenever it is shown or hidden (the Page Visibility API); w
 teacher is watching, and each change (a page closing counts as hidden) goes into the queue as an attention
 event (human/attention.py), answered with {"type": "attention", "watching": ...}. Requests without the token
 get 403.
+
+Anything else a connection sends is answered with {"type": "error", "error": REASON} and logged (at most
+MAX_LOGGED lines a connection): binary data, text that is not JSON or is nested past Python's recursion limit,
+JSON that is not a mapping, a value that is not exactly 1, -1 or 0. A message over MAX_MSG_BYTES closes the
+connection (aiohttp's max_msg_size, code 1009), also logged. The handler never raises: the page and the learner
+go on.
 """
 
 from __future__ import annotations

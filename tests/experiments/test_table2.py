@@ -103,7 +103,7 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     for name in ("condition_DTW.json", "condition_DTP.json", "table2.json"):
         (out / name).unlink()
     assert main(["reproduce", "table2", "--config", str(cfg), "--seeds", "2", "--out", str(out), "--quiet"]) == 2
-    assert "already holds a table2 run; pass --resume" in capsys.readouterr().err
+    assert "is not empty (it holds a table2 run" in capsys.readouterr().err  # and --resume continues it
     assert main(["reproduce", "table2", "--config", str(cfg), "--seeds", "2", "--out", str(out), "--quiet",
                  "--resume"]) == 0
     resumed = json.loads((out / "table2.json").read_text())["conditions"]

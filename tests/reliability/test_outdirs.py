@@ -68,7 +68,6 @@ def test_pretrain_refuses_what_is_not_new_empty_or_its_own_run(pretrain_run, tab
         (["--out", pretrain_run], "is not empty (it holds a pretrain run (checkpoints, config.yaml"),
         (["--out", pretrain_run], "or --resume to continue it"),  # a run written before claims: its config.yaml
         (["--out", table2_run], "is not empty (it holds condition_DDPG.json, config.yaml); give a new or empty"),
-        (["--resume", "--out", table2_run], "holds condition_DDPG.json, config.yaml, not a pretrain to continue"),
         (["--out", tmp_path / "afile"], "is a file, not a directory"),
         (["--out", tmp_path / "afile" / "below"], "cannot be created"),
     ]
@@ -77,6 +76,11 @@ def test_pretrain_refuses_what_is_not_new_empty_or_its_own_run(pretrain_run, tab
         assert code == 2 and len(err) == 1 and err[0].startswith("protamer: output directory error: --out "), err
         assert says in err[0], (argv, err)
     assert {d: tree_digest(d) for d in before} == before
+    # --resume of a directory written before claims, with a config.yaml (pretrain's own file) but no checkpoint:
+    # refused by the run, and the directory is left as it was (not marked as a pretrain run)
+    code, err = run_cli(capsys, "pretrain", "--resume", "--out", table2_run)
+    assert code == 2 and len(err) == 1 and "holds no checkpoint to continue from" in err[0], err
+    assert tree_digest(table2_run) == before[table2_run] and not (table2_run / MARK).exists()
     # a table2 run marked as one: named by its kind
     claim(table2_run, "table2", resume=True, own=("condition_DDPG.json",)).release()
     code, err = run_cli(capsys, "pretrain", "--resume", "--out", table2_run)

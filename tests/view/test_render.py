@@ -125,7 +125,8 @@ def test_render_command_writes_a_video_a_gif_and_a_png_of_the_toy_run(toy_run, t
 def test_render_command_errors_are_one_clear_line(toy_run, tmp_path, capsys):
     cases = [(["--checkpoint", toy_run, "--out", tmp_path / "x.avi"], "must end in .mp4, .gif, .png"),
              (["--checkpoint", toy_run, "--out", tmp_path / "no" / "x.mp4"], "does not exist"),
-             (["--checkpoint", toy_run, "--out", tmp_path / "x.mp4", "--episodes", "0"], "--episodes must be >= 1"),
+             (["--checkpoint", toy_run, "--out", tmp_path / "x.mp4", "--episodes", "0"],
+              "--episodes must be a whole number within 1.."),
              (["--checkpoint", tmp_path, "--out", tmp_path / "x.mp4"], "is not a pretrain run directory")]
     for argv, said in cases:
         assert render_main(*argv) == 2
