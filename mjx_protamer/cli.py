@@ -38,28 +38,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# What each error is called on the one line the command prints, and its exit code.
+ONE_LINE_ERRORS = ((ConfigError, "configuration error", 2), (CheckpointError, "checkpoint error", 2),
+                   (SessionRecordError, "session record error", 2), (OutputDirError, "output directory error", 2),
+                   (OutOfMemoryEstimate, "not enough memory", 2), (WriteFailed, "write failed", 1))
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.handler(args) or 0)
-    except ConfigError as e:
-        print(f"protamer: configuration error: {e}", file=sys.stderr)
-        return 2
-    except CheckpointError as e:
-        print(f"protamer: checkpoint error: {e}", file=sys.stderr)
-        return 2
-    except SessionRecordError as e:
-        print(f"protamer: session record error: {e}", file=sys.stderr)
-        return 2
-    except OutputDirError as e:
-        print(f"protamer: output directory error: {e}", file=sys.stderr)
-        return 2
-    except OutOfMemoryEstimate as e:
-        print(f"protamer: not enough memory: {e}", file=sys.stderr)
-        return 2
-    except WriteFailed as e:
-        print(f"protamer: write failed: {e}", file=sys.stderr)
-        return 1
+    except tuple(cls for cls, _, _ in ONE_LINE_ERRORS) as e:
+        name, code = next((n, c) for cls, n, c in ONE_LINE_ERRORS if isinstance(e, cls))
+        print(f"protamer: {name}: {e}", file=sys.stderr)
+        return code
     except KeyboardInterrupt:
         print("protamer: interrupted", file=sys.stderr)
         return 130

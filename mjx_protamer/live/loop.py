@@ -16,6 +16,8 @@ import math
 import signal
 import time
 
+from mjx_protamer.errors import WriteFailed  # a save or a record line could not be written: the session ends
+
 
 class Stopper:
     """SIGINT/SIGTERM: the first one stops after the current chunk (which then gets saved); a second SIGINT
@@ -41,10 +43,6 @@ class Stopper:
     def __exit__(self, *exc):
         for s, h in self._old.items():
             signal.signal(s, h)
-
-
-class WriteFailed(RuntimeError):
-    """A save or a record line could not be written (disk full, permissions): the session ends."""
 
 
 @dataclasses.dataclass

@@ -92,7 +92,7 @@ class Saver:
 
         from mjx_protamer.config import to_dict
         from mjx_protamer.experiments import checkpoints
-        from mjx_protamer.live.loop import WriteFailed
+        from mjx_protamer.errors import WriteFailed
 
         out = self.spec.out
         try:
@@ -119,7 +119,8 @@ class Saver:
 
 def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segment: int) -> int:
     """View, sources, loop, the final drain and save, cleanup; the exit code."""
-    from mjx_protamer.live.loop import Stopper, WriteFailed, run_loop
+    from mjx_protamer.errors import WriteFailed
+    from mjx_protamer.live.loop import Stopper, run_loop
     from mjx_protamer.live.pace import UpdatePacer
     from mjx_protamer.live.sinks import RecordSink, TerminalSink, ViewSink, calibration_prompt, start_view
 
