@@ -85,6 +85,9 @@ def register(subparsers) -> None:
                    "paper's alpha r_env + beta r_hat DDPG)")
     v.add_argument("--episodes", default=10, help="test episodes per actor (default 10)")
     v.add_argument("--parallel", default=1, help="unpaced sessions at once (default 1)")
+    v.add_argument("--learner", choices=("ddpg", "coach"), default="ddpg",
+                   help="ddpg (default): DDPG + DeepTAMER; coach: Deep COACH from the checkpoint's actor (without "
+                   "feedback it does not learn: its no-feedback arm is the start)")
     v.add_argument("--out", type=Path, required=True, help="output directory: new, empty, or one this command wrote "
                    "before (its finished sessions are kept)")
     v.set_defaults(handler=_live)
@@ -195,7 +198,7 @@ def _live(args: argparse.Namespace) -> int:
         try:
             checkpoints = pretrain_checkpoints(out, seeds) if seeds is not None else args.checkpoints
             plan = Plan(tuple(Path(c) for c in checkpoints), out, channels, minutes, 250.0, args.rule_config,
-                        tuple(args.overrides), episodes, parallel)
+                        tuple(args.overrides), episodes, parallel, args.learner)
             summary = run_live_effect(plan)
         except OSError as e:  # a full disk, no permission: one line
             from mjx_protamer.errors import write_failed

@@ -44,6 +44,7 @@ class Plan:
     overrides: tuple[str, ...] = ()  # --set for every session (e.g. a mechanism's setting)
     episodes: int = 10
     parallel: int = 1  # unpaced sessions at once (paced ones always run alone)
+    learner: str = "ddpg"  # or "coach": Deep COACH from the checkpoint's actor (its no-feedback arm is the start)
 
     @property
     def chunks(self) -> int:
@@ -62,6 +63,7 @@ def _session_argv(plan: Plan, ckpt: Path, arm: str, seed: int, out: Path) -> lis
     argv = [sys.executable, "-m", "mjx_protamer.cli", "finetune", "--checkpoint", str(ckpt), "--out", str(out),
             "--view", "none", "--chunk-ms", str(plan.chunk_ms), "--max-chunks", str(plan.chunks),
             "--autosave-s", "0", "--set", rule_override(plan.rule_config), "--set", f"feedback.seed={seed}"]
+    argv += ["--learner", plan.learner]
     if arm in ("none", "keyboard"):
         argv += ["--feedback", "none" if arm == "none" else "simulated:keyboard", "--no-pace"]
     else:  # the simulated speaker, at real-time pace, no more updates per shown step than the unpaced sessions
@@ -128,6 +130,25 @@ def scorer(checkpoint: Path, rule_config, episodes: int):
     return score, state.actor_params
 
 
+def final_actor(session: Path, learner: str):
+    """The deterministic policy a session ended with: DDPG's actor, or the mean of COACH's Gaussian policy (the
+    actor's layers, `live/coach.py`)."""
+    from mjx_protamer.experiments.run_loader import load_run
+
+    if learner == "ddpg":
+        return load_run(session)[2].actor_params
+    from mjx_protamer.live.build import build_learner, load_checkpoint
+    from mjx_protamer.live.record import read_manifest
+    from mjx_protamer.live.spec import SessionSpec
+
+    manifest = read_manifest(session)
+    spec = SessionSpec.from_manifest(manifest, session)
+    coach = build_learner(spec, load_checkpoint(Path(manifest["checkpoint_step_dir"]), report=lambda line: None),
+                          clock=lambda: 0.0)
+    coach.load_policy(session)
+    return {"params": {k: v for k, v in coach.learner.params["params"].items() if k.startswith("Dense_")}}
+
+
 def _session_facts(out: Path) -> dict:
     """What a finished session itself reports: events, updates per shown step, the speaker's delivery."""
     manifest = json.loads((out / "session.json").read_text())
@@ -151,16 +172,19 @@ def run_live_effect(plan: Plan, log=print) -> dict:
 
     plan.out.mkdir(parents=True, exist_ok=True)
     arms = ("none", *plan.channels)
-    jobs = {arm: [] for arm in arms}
+    # Deep COACH learns from corrections alone: without feedback its policy stays the checkpoint's actor, so its
+    # no-feedback arm is the start (no session is run for it)
+    ran = arms if plan.learner == "ddpg" else plan.channels
+    jobs = {arm: [] for arm in ran}
     for k, ckpt in enumerate(plan.checkpoints):
-        for arm in arms:
+        for arm in ran:
             d = plan.out / f"{arm}_{k}"
             jobs[arm].append((_session_argv(plan, ckpt, arm, k, d), d))
-    unpaced = [j for arm in arms if arm in ("none", "keyboard") for j in jobs[arm]]
+    unpaced = [j for arm in ran if arm in ("none", "keyboard") for j in jobs[arm]]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max(1, plan.parallel)) as ex:
         list(ex.map(lambda j: _run_session(j[0], j[1], log), unpaced))
-    for arm in arms:
+    for arm in ran:
         if arm in ("prosody", "whisper"):
             for argv, d in jobs[arm]:
                 _run_session(argv, d, log)
@@ -172,7 +196,7 @@ def run_live_effect(plan: Plan, log=print) -> dict:
         row = {"checkpoint": str(ckpt), "start": score(start)}
         for arm in arms:
             d = plan.out / f"{arm}_{k}"
-            row[arm] = {**score(load_run(d)[2].actor_params), **_session_facts(d)}
+            row[arm] = {**score(final_actor(d, plan.learner)), **_session_facts(d)} if arm in ran else dict(row["start"])
         rows.append(row)
         log(f"[live] checkpoint {k}: teacher score start {row['start']['teacher_score']:+.3f}, "
             + ", ".join(f"{a} {row[a]['teacher_score']:+.3f}" for a in arms))

@@ -120,7 +120,7 @@ class Saver:
 def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segment: int) -> int:
     """View, sources, loop, the final drain and save, cleanup; the exit code."""
     from mjx_protamer.errors import WriteFailed
-    from mjx_protamer.live.loop import Stopper, run_loop
+    from mjx_protamer.live.loop import LoopResult, Stopper, run_loop
     from mjx_protamer.live.pace import UpdatePacer
     from mjx_protamer.live.sinks import RecordSink, TerminalSink, ViewSink, calibration_prompt, start_view
 
@@ -132,7 +132,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         print(f"[view] not available ({why}); the session goes on without it", flush=True)
     sources = _sources(spec, learner, loaded, clock, segment)
     record = RecordSink(recorder)
-    sinks = [TerminalSink(), record] + ([ViewSink(view, spec)] if view is not None else [])
+    view_sink = ViewSink(view, spec) if view is not None else None
+    sinks = [TerminalSink(), record] + ([view_sink] if view_sink is not None else [])
     sc = spec.config.session
     pacer = UpdatePacer(learner.chunk_steps, learner.dt, sc.updates_per_step, sc.max_updates_per_step,
                         sc.spare_fraction, sc.unpaced_updates_per_step, paced=spec.pace and spec.live)
@@ -163,6 +164,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
             print("[finetune] compiling (first chunk and feedback update)...", flush=True)
             learner.warm_up()
             result = run_loop(spec, learner, sources, sinks, pacer, clock, stopper, saver, on_ready)
+        except KeyboardInterrupt:  # a second Ctrl-C while compiling
+            result = LoopResult(interrupted=True)
         finally:
             for s in sources:
                 s.stop()
@@ -176,8 +179,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
             recorder.final([o.event for o in final])
         except OSError as e:
             write_error = write_error or f"the record could not be written ({e})"
-        if view is not None:
-            ViewSink.close(sinks[-1])
+        if view_sink is not None:
+            view_sink.close()
         if write_error is None:
             try:
                 saver()
