@@ -85,10 +85,11 @@ def _pretrain(args: argparse.Namespace) -> int:
     fb_raw: dict = {}
     if args.feedback_config is not None:
         fb_raw = read_raw(args.feedback_config)
-        unknown = sorted(set(fb_raw) - {"pretrain", "feedback", "batched"})
+        # `session` is a live session's section (protamer finetune): batched pretraining has no use for it
+        unknown = sorted(set(fb_raw) - {"pretrain", "feedback", "batched", "session"})
         if unknown:
             raise ConfigError(f"{args.feedback_config}: unknown key(s) {', '.join(unknown)}; "
-                              "allowed keys: pretrain, feedback, batched")
+                              "allowed keys: pretrain, feedback, batched, session")
     if args.config is None and "pretrain" in fb_raw:
         config = from_dict(PretrainConfig, apply_overrides(_section(fb_raw, "pretrain"), overrides), "pretrain")
     elif args.config is None:  # overrides apply on top of the whole built-in default, section by section
