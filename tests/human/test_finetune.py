@@ -641,9 +641,9 @@ def test_self_touch_session_runs_on_the_live_backend_records_it_and_replays_bit_
     assert load_config(PretrainConfig, pre / "config.yaml").env.backend == "native"
     live = resolve_backend("auto", num_envs=1)
     session, again = tmp_path / "session", tmp_path / "replay"
-    # a calibration of 0.2 s shown: the session is saved, and exit code 2 says the fit could not be made
+    # a calibration of 0.6 s shown (the first touch comes at about step 60): the session is saved, and exit code 2 says the fit could not be made
     assert run_main("--feedback", "simulated:keyboard", "--checkpoint", pre, "--out", session,
-                    "--chunk-ms", "100", "--max-chunks", "3", "--calibrate", "head", *TEACHER) == 2
+                    "--chunk-ms", "100", "--max-chunks", "6", "--calibrate", "head", *TEACHER) == 2
     said = capsys.readouterr()
     assert f"[finetune] physics backend: {live} (the fastest for one world here)" in said.out
     assert "[calibrate] calibration: give feedback (+, or say 'good') as soon as you see a hand arrive at the " \
@@ -674,4 +674,4 @@ def test_self_touch_session_runs_on_the_live_backend_records_it_and_replays_bit_
             for step, on in changes:
                 assert r["first_step"] <= step < r["first_step"] + 20 and on == 1 - state.get(name, 0)
                 state[name] = on
-    assert state, "a self-touch session of 60 steps recorded no touch"
+    assert state, "a self-touch session of 120 steps recorded no touch"
