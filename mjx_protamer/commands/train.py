@@ -85,11 +85,12 @@ def _pretrain(args: argparse.Namespace) -> int:
     fb_raw: dict = {}
     if args.feedback_config is not None:
         fb_raw = read_raw(args.feedback_config)
-        # `session` is a live session's section (protamer finetune): batched pretraining has no use for it
-        unknown = sorted(set(fb_raw) - {"pretrain", "feedback", "batched", "session"})
+        # `session` and `coach` are a live session's sections (protamer finetune): batched pretraining has no
+        # use for them
+        unknown = sorted(set(fb_raw) - {"pretrain", "feedback", "batched", "session", "coach"})
         if unknown:
             raise ConfigError(f"{args.feedback_config}: unknown key(s) {', '.join(unknown)}; "
-                              "allowed keys: pretrain, feedback, batched, session")
+                              "allowed keys: pretrain, feedback, batched, session, coach")
     if args.config is None and "pretrain" in fb_raw:
         config = from_dict(PretrainConfig, apply_overrides(_section(fb_raw, "pretrain"), overrides), "pretrain")
     elif args.config is None:  # overrides apply on top of the whole built-in default, section by section

@@ -2,7 +2,9 @@
 
 `configs/feedback_*.yaml` are `FeedbackRunConfig`s: a pretrain section (a PretrainConfig: what `pretrain
 --feedback` trains; a live session takes the checkpoint's instead, except the DDPG keys in
-`SESSION_DDPG_KEYS`), the feedback section and the session section. Loaded by the one validating loader
+`SESSION_DDPG_KEYS`), the feedback section, the session section and the coach section (what a
+`finetune --learner coach` session's Deep COACH learns with; `--coach-delay-s` and `--coach-init actor` set
+its delay and its network's shape on top). Loaded by the one validating loader
 (`mjx_protamer.config.load_config`).
 """
 
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from mjx_protamer.agents.coach.config import CoachConfig
 from mjx_protamer.agents.ddpg.config import PretrainConfig
 from mjx_protamer.config import check
 from mjx_protamer.human.credit import CreditConfig
@@ -75,11 +78,13 @@ class SessionConfig:
 
 @dataclasses.dataclass(frozen=True)
 class FeedbackRunConfig:
-    """configs/feedback_*.yaml: a pretrain config (env, ddpg, train), the feedback section and a session's."""
+    """configs/feedback_*.yaml: a pretrain config (env, ddpg, train), the feedback section, a session's and
+    Deep COACH's."""
 
     pretrain: PretrainConfig = dataclasses.field(default_factory=PretrainConfig)
     feedback: FeedbackConfig = dataclasses.field(default_factory=FeedbackConfig)
     session: SessionConfig = dataclasses.field(default_factory=SessionConfig)
+    coach: CoachConfig = dataclasses.field(default_factory=CoachConfig)
 
     def validate(self) -> None:
         check(self.feedback.watch_env < self.pretrain.train.num_envs, "feedback.watch_env",

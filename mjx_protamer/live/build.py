@@ -65,6 +65,24 @@ def replay_size(spec: SessionSpec, pre) -> int:
     return max(pre.ddpg.batch_size, spec.config.session.replay_from_checkpoint, spec.chunk_steps)
 
 
+def coach_config(spec: SessionSpec, pre):
+    """Deep COACH's config for a session: the feedback config's `coach` section (`--set coach.KEY=V`), with the
+    judged window's delay from `--coach-delay-s`, and, from the checkpoint's actor (`--coach-init actor`), the
+    actor's widths and relu with the log std that starts it near the actor's behaviour (`--coach-log-std`
+    overrides it)."""
+    from mjx_protamer.live.coach import ACTOR_LOG_STD
+
+    delay = round(spec.coach_delay_s / spec.config.feedback.dt)
+    coach = dataclasses.replace(spec.config.coach, human_delay_steps=delay)
+    if spec.coach_init == "actor":
+        coach = dataclasses.replace(coach, hidden=tuple(pre.ddpg.actor_hidden), activation="relu",
+                                    init_log_std=ACTOR_LOG_STD)
+    if spec.coach_log_std is not None:
+        coach = dataclasses.replace(coach, init_log_std=float(spec.coach_log_std))
+    coach.validate()
+    return coach
+
+
 def build_learner(spec: SessionSpec, loaded: Loaded, clock, queue=None, log_path: Path | None = None,
                   segment: int = 0):
     """The session's learner on `loaded`, in its starting state (a new session's: the checkpoint's networks;
@@ -73,17 +91,11 @@ def build_learner(spec: SessionSpec, loaded: Loaded, clock, queue=None, log_path
     fc, sc = spec.config.feedback, spec.config.session
     seed = fc.seed + 7919 * segment  # host streams of a later segment (a resume) differ, reproducibly
     if spec.learner == "coach":
-        from mjx_protamer.agents.coach import CoachConfig
-        from mjx_protamer.live.coach import ACTOR_LOG_STD, CoachSessionLearner
+        from mjx_protamer.live.coach import CoachSessionLearner
 
         pre = loaded.pre
         from_actor = spec.coach_init == "actor"
-        coach = CoachConfig(human_delay_steps=round(spec.coach_delay_s / fc.dt))
-        if from_actor:
-            coach = dataclasses.replace(coach, hidden=tuple(pre.ddpg.actor_hidden), activation="relu",
-                                        init_log_std=ACTOR_LOG_STD)
-        if spec.coach_log_std is not None:
-            coach = dataclasses.replace(coach, init_log_std=float(spec.coach_log_std))
+        coach = coach_config(spec, pre)
         learner = CoachSessionLearner(coach, loaded.env, fc.dt, spec.chunk_steps, pre.train.episode_length,
                                       fc.credit.min_interval_steps, seed, clock, queue, fc.queue_size, log_path)
         if segment == 0:

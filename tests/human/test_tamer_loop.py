@@ -99,6 +99,29 @@ def test_a_session_refuses_silences_gated_by_an_attention_signal_its_teacher_lac
                        config=None, overrides=gated)
 
 
+def test_deep_coach_is_configured_from_the_coach_section_and_the_command_line(tmp_path):
+    """`--set coach.KEY=V` reaches a COACH session's learner (validated by the one loader); --coach-delay-s sets
+    the judged window's delay in steps, and --coach-init actor the actor's network shape on top."""
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.live.build import coach_config
+    from mjx_protamer.live.coach import ACTOR_LOG_STD
+    from mjx_protamer.live.spec import SessionSpec
+
+    pre = PretrainConfig()
+    spec = SessionSpec.create(learner="coach", feedback="keyboard", out=tmp_path / "s", checkpoint=None, config=None,
+                              overrides=["coach.learning_rate=0.001", "coach.window=6"], coach_delay_s=0.2)
+    cfg = coach_config(spec, pre)
+    assert (cfg.learning_rate, cfg.window, cfg.human_delay_steps) == (0.001, 6, 40)  # 0.2 s at 200 Hz
+    assert cfg.hidden == tuple(pre.ddpg.actor_hidden) and cfg.activation == "relu" and cfg.init_log_std == ACTOR_LOG_STD
+    scratch = SessionSpec.create(learner="coach", feedback="keyboard", out=tmp_path / "s", checkpoint=None,
+                                 config=None, coach_init="scratch", coach_log_std=-1.5)
+    cfg = coach_config(scratch, pre)
+    assert cfg.hidden == (64, 64) and cfg.activation == "tanh" and cfg.init_log_std == -1.5
+    with pytest.raises(ConfigError, match="coach.trace_decay"):
+        SessionSpec.create(learner="coach", feedback="keyboard", out=tmp_path / "s", checkpoint=None, config=None,
+                           overrides=["coach.trace_decay=0"])
+
+
 @pytest.mark.slow
 def test_tamer_with_simulated_keyboard_teacher_moves_behaviour_its_way():
     import jax
