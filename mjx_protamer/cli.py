@@ -57,6 +57,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("protamer: interrupted", file=sys.stderr)
         return _leave(130)
+    except Exception:  # a bug: a process of a multi-process run prints its traceback and leaves at once too
+        dist = sys.modules.get("mjx_protamer.experiments.distributed")
+        if dist is not None and dist.joined():
+            import traceback
+
+            traceback.print_exc()
+            dist.exit_if_joined(1)
+        raise
 
 
 def _leave(code: int) -> int:

@@ -89,6 +89,10 @@ def join(spec: Processes) -> tuple[int, int]:
 
     # CPU collectives (the hand-off) through gloo: the default of jax 0.10, named for versions where it is not
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    # No preemption sync points here: JAX's preemption service would catch SIGTERM (the launcher's and SLURM's
+    # stop) and the process would run on until SIGKILL; without it SIGTERM ends the process at once (every file
+    # a run keeps is written atomically)
+    jax.config.update("jax_enable_preemption_service", False)
 
     def not_joined():  # the runtime would abort with a stack trace JOIN_MARGIN_S later
         where = f" at {spec.coordinator}" if spec.coordinator else ""
@@ -112,6 +116,11 @@ def join(spec: Processes) -> tuple[int, int]:
         watchdog.cancel()
     _joined = True
     return jax.process_index(), jax.process_count()
+
+
+def joined() -> bool:
+    """Whether this process joined a jax.distributed job (`join`)."""
+    return _joined
 
 
 def _print_and_exit(line: str, code: int) -> None:

@@ -162,10 +162,12 @@ def test_a_killed_process_stops_the_others_with_one_line(config, tmp_path):
             proc.kill()
     assert proc.returncode == 1
     last = err.strip().splitlines()[-1]
-    assert re.fullmatch(rf"protamer: distributed run error: process 1 \(pid {pids[1]}\) was killed by signal 9 "
-                        r"\(SIGKILL\); stopped the other 1 process\(es\) in \d+\.\d s; what each process finished is "
-                        r"kept in OUT/process_<k>: the same command with --resume continues it", last), last
-    assert took < 5 + 5  # --grace, and the launcher's one-second look
+    m = re.fullmatch(rf"protamer: distributed run error: process 1 \(pid {pids[1]}\) was killed by signal 9 "
+                     r"\(SIGKILL\); stopped the other 1 process\(es\) in (\d+\.\d) s; what each process finished is "
+                     r"kept in OUT/process_<k>: the same command with --resume continues it", last)
+    assert m, last
+    assert float(m[1]) < 5  # the survivor ended on SIGTERM, before --grace's SIGKILL (JAX's preemption service is off)
+    assert took < 5  # the launcher looks every second
     with pytest.raises(ProcessLookupError):
         os.kill(pids[0], 0)  # the survivor is gone too
     assert not (out / "table2.json").exists()
