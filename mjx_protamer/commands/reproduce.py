@@ -131,6 +131,10 @@ def _table2(args: argparse.Namespace) -> int:
     spec = _processes(args)
     if spec is not None:
         return _table2_processes(args, cfg, spec, own)
+    if args.resume and (out / "processes.json").is_file():
+        from mjx_protamer.config import ConfigError
+        raise ConfigError(f"--resume: {out} is a run of several processes ({out / 'processes.json'}); continue it "
+                          "with the same `protamer launch --processes N` (or --distributed) and --resume")
     with claimed(out, TABLE2, resume=args.resume, own=own):  # checked and locked before JAX starts, until the end
         _enable_compile_cache()
         from mjx_protamer.experiments.table2 import run_table2

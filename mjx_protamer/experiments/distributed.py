@@ -268,9 +268,13 @@ def _write_merged(cfg, out: Path, parts: list, layout: dict, total_s: float) -> 
 
 
 def _check_layout(path: Path, layout: dict, resume: bool) -> None:
-    """processes.json says how the seeds were split; a resumed run must split them the same way."""
+    """processes.json says how the seeds were split; a resumed run must split them the same way (and a run of
+    one process is continued by one process)."""
     from mjx_protamer.experiments.checkpoints import write_atomic
 
+    if resume and not path.is_file() and any(path.parent.glob("condition_*.json")):
+        raise ConfigError(f"--resume: {path.parent} is a run of one process; continue it with one process (without "
+                          "protamer launch, --distributed or --coordinator)")
     if resume and path.is_file():
         before = json.loads(path.read_text())
         if before != layout:

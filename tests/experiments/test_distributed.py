@@ -223,6 +223,14 @@ def test_two_processes_give_the_results_of_one_process_running_the_same_blocks(c
     assert summary["conditions"]["DTK"]["feedback"]["feedback_total"] > 0
 
 
+def test_a_run_of_several_processes_is_not_resumed_by_one(config, tmp_path, capsys):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "processes.json").write_text(json.dumps({"count": 2, "seed_blocks": [[0, 1], [2, 3]]}))
+    assert main(["reproduce", "table2", "--config", str(config), "--seeds", "4", "--out", str(out), "--resume"]) == 2
+    assert "is a run of several processes" in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_resume_continues_every_process_to_the_same_table(config, tmp_path):
     """A run stopped after process 0 finished both conditions and process 1 only DDPG: --resume keeps what
@@ -251,6 +259,14 @@ def test_resume_continues_every_process_to_the_same_table(config, tmp_path):
                                  "--seeds", 4, "--out", out, "--resume"), capture_output=True, text=True, cwd=ROOT,
                        timeout=300)
     assert r.returncode == 1 and "continue it with the same --processes and --seeds" in r.stdout
+    # a run of one process is continued by one process
+    single = tmp_path / "single"
+    single.mkdir()
+    (single / "condition_DDPG.json").write_text("{}")
+    r = subprocess.run(_protamer("launch", "--processes", 2, "--", "reproduce", "table2", "--config", config,
+                                 "--seeds", 4, "--out", single, "--resume"), capture_output=True, text=True, cwd=ROOT,
+                       timeout=300)
+    assert r.returncode == 1 and "is a run of one process; continue it with one process" in r.stdout
 
 
 def test_the_sbatch_example_runs_a_valid_protamer_command(tmp_path):
