@@ -41,3 +41,17 @@ def _shown(value) -> str:
     """The value as given, shortened: a 5,000-digit number is not echoed whole."""
     text = repr(value)
     return text if len(text) <= 40 else f"{text[:20]}...{text[-8:]} ({len(text)} characters)"
+
+
+def port(name: str, value) -> int:
+    """A TCP port from the command line: a whole number within 1..65535."""
+    return number(name, value, 1, 65535, integer=True)
+
+
+def address(name: str, value) -> str:
+    """HOST:PORT from the command line (an IPv6 host in brackets: [::1]:1234); the port checked like `port`."""
+    host, sep, text = str(value).rpartition(":")
+    if not sep or not host or (host.startswith("[") != host.endswith("]")):
+        raise ConfigError(f"{name} must be HOST:PORT, e.g. 10.0.0.1:1234, got {_shown(value)}")
+    port(f"{name}'s port", text)
+    return str(value)

@@ -28,6 +28,11 @@ class OutputDirError(ValueError):
     says what is there and what to give instead."""
 
 
+class DistributedError(RuntimeError):
+    """A run on several processes cannot go on: a process did not join, died, or the hand-off of the results
+    failed; the message names the process and what is kept. Exit code 1."""
+
+
 class WriteFailed(RuntimeError):
     """A run could not write its files (a full disk, no permission); the message names the path and the last good
     checkpoint, which `--resume` continues from. Exit code 1."""

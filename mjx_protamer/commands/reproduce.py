@@ -43,6 +43,20 @@ def register(subparsers) -> None:
     t.add_argument("--resume", action="store_true",
                    help="continue the run in --out: conditions already finished there are kept, not retrained")
     t.add_argument("--quiet", action="store_true", help="no per-chunk progress lines")
+    d = t.add_argument_group(
+        "several processes", "jax.distributed: each process trains a contiguous block of the seeds (every condition) "
+        "into OUT/process_<k>; process 0 gathers the results and writes the table and figures into OUT. `protamer "
+        "launch` sets these for local processes; --resume continues every process")
+    d.add_argument("--distributed", action="store_true", help="join the job SLURM or Open MPI started (srun, mpirun): "
+                   "coordinator, process count and index detected (scripts/table2_slurm.sbatch)")
+    d.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="process 0's address and a port for its "
+                   "coordinator (with --processes and --process-id)")
+    d.add_argument("--processes", default=None, metavar="N", help="how many processes the job has")
+    d.add_argument("--process-id", default=None, metavar="K", help="this process's index, 0..N-1")
+    d.add_argument("--join-timeout", default=300, metavar="S", help="seconds for every process to join, else each "
+                   "stops with one line (default 300)")
+    d.add_argument("--heartbeat-timeout", default=100, metavar="S", help="seconds after which a silent process "
+                   "counts as dead and the others stop (default 100)")
     t.set_defaults(handler=_table2)
     r = sub.add_parser(
         "rescore",
@@ -114,6 +128,13 @@ def _table2(args: argparse.Namespace) -> int:
     own = ("table2.json",) + tuple(f"condition_{c.name}.json" for c in cfg.conditions)
     from mjx_protamer.outdir import claimed
 
+    spec = _processes(args)
+    if spec is not None:
+        return _table2_processes(args, cfg, spec, own)
+    if args.resume and (out / "processes.json").is_file():
+        from mjx_protamer.config import ConfigError
+        raise ConfigError(f"--resume: {out} is a run of several processes ({out / 'processes.json'}); continue it "
+                          "with the same `protamer launch --processes N` (or --distributed) and --resume")
     with claimed(out, TABLE2, resume=args.resume, own=own):  # checked and locked before JAX starts, until the end
         _enable_compile_cache()
         from mjx_protamer.experiments.table2 import run_table2
@@ -123,6 +144,57 @@ def _table2(args: argparse.Namespace) -> int:
                 result = run_table2(cfg, out, progress=not args.quiet, resume=args.resume)
         except OSError as e:  # a full disk, no permission: one line, and what --resume keeps
             raise _table2_write_failed(e, out, cfg) from None
+    print(Path(result["table_md"]).read_text())
+    for key in ("table_md", "table_json", "figure1", "figure2", "training_csv"):
+        print(f"{key:<13} {result[key]}")
+    print(f"wall time     {result['wall_s']:.0f} s")
+    return 0
+
+
+def _processes(args: argparse.Namespace):
+    """The jax.distributed job this process joins (experiments/distributed.py), or None for one process."""
+    from mjx_protamer.cli_numbers import address, number
+    from mjx_protamer.config import ConfigError
+
+    explicit = {"--coordinator": args.coordinator, "--processes": args.processes, "--process-id": args.process_id}
+    given = [k for k, v in explicit.items() if v is not None]
+    if not given and not args.distributed:
+        return None
+    if args.distributed and given:
+        raise ConfigError(f"--distributed detects the job from SLURM or Open MPI; leave out {given[0]}, or leave "
+                          "out --distributed and give --coordinator, --processes and --process-id")
+    if given and len(given) < 3:
+        missing = [k for k in explicit if k not in given]
+        raise ConfigError(f"{given[0]} needs {' and '.join(missing)} too")
+    if args.out is None:
+        raise ConfigError("--out is needed on several processes: every process must name the same directory")
+    from mjx_protamer.experiments.distributed import Processes
+
+    join_s = number("--join-timeout", args.join_timeout, 1, 86_400, integer=True)
+    heartbeat_s = number("--heartbeat-timeout", args.heartbeat_timeout, 1, 86_400, integer=True)
+    if args.distributed:
+        return Processes(join_timeout_s=join_s, heartbeat_timeout_s=heartbeat_s)
+    count = number("--processes", args.processes, 1, 1024, integer=True)
+    return Processes(address("--coordinator", args.coordinator), count,
+                     number("--process-id", args.process_id, 0, count - 1, integer=True), join_s, heartbeat_s)
+
+
+def _table2_processes(args: argparse.Namespace, cfg, spec, own) -> int:
+    """This process's part of a table2 run on several processes; process 0 prints the table."""
+    from mjx_protamer.commands.train import _enable_compile_cache
+    from mjx_protamer.errors import write_failed
+    from mjx_protamer.experiments.distributed import run_table2_processes
+
+    _enable_compile_cache()
+    try:
+        with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
+            result = run_table2_processes(cfg, args.out, spec, progress=not args.quiet, resume=args.resume,
+                                          claim_kind=TABLE2, own=own)
+    except OSError as e:  # a full disk, no permission: one line, and what --resume keeps
+        raise write_failed(e, args.out, f"the conditions each process finished are kept in {args.out}/process_<k>",
+                           "continue with the same command and --resume") from None
+    if result is None:  # not process 0: its seeds are in the table process 0 writes
+        return 0
     print(Path(result["table_md"]).read_text())
     for key in ("table_md", "table_json", "figure1", "figure2", "training_csv"):
         print(f"{key:<13} {result[key]}")

@@ -139,6 +139,25 @@ def load_table2_config(path=None, overrides=None, seeds: int | None = None) -> T
 def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False) -> dict:
     """Every condition's results are written atomically as it finishes (`condition_<name>.json`): a run
     killed at any moment loses at most the condition it was training, and `resume` continues it."""
+    t_all = time.perf_counter()
+    trained = train_table2(cfg, out_dir, progress, resume)
+    return write_table2(cfg, out_dir, trained, time.perf_counter() - t_all)
+
+
+@dataclasses.dataclass
+class Trained:
+    """What `train_table2` hands to `write_table2`: every chunk's training row, each condition's test results
+    per seed (`evals[name][seed]`) and its training seconds (`wall[name]`). Plain Python: JSON round-trips it
+    (`experiments/distributed.py` gathers it from every process)."""
+    training: list[dict]
+    evals: dict[str, dict[int, dict]]
+    wall: dict[str, list[float]]
+
+
+def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False) -> Trained:
+    """Train and test every condition on `cfg.seeds` (vmapped in one program), writing each condition's results
+    and agents into `out_dir` as it finishes; the pooled reward-model score at the end. No table or figures:
+    `write_table2` makes them."""
     from mjx_protamer.experiments.checkpoints import write_atomic
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
 
@@ -155,7 +174,6 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
     pre = cfg.pretrain
     tc = pre.train
     env = make_env(pre)
-    t_all = time.perf_counter()
     ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)
     # Every seed's state side by side, and what the run keeps of every condition: refused before allocating
     from mjx_protamer.agents.ddpg.train import resolve_devices
@@ -265,9 +283,18 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
         for i, seed in enumerate(cfg.seeds):
             evals[name][seed].update(per_seed[i])
             write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(evals[name][seed], indent=2))
-    total_s = time.perf_counter() - t_all
+    return Trained(training, evals, wall)
+
+
+def write_table2(cfg: Table2Config, out_dir, trained: Trained, total_s: float, extra: dict | None = None) -> dict:
+    """table2.json / table2.md (with `extra`'s keys added to the summary), the figures, training.csv and the body
+    maps of a trained run into `out_dir`; the paths, the wall time and the summary."""
+    from mjx_protamer.experiments.checkpoints import write_atomic
+
+    out, pre = Path(out_dir), cfg.pretrain
+    training, evals = trained.training, trained.evals
     _write_training_csv(training, out / "training.csv")
-    summary = summarize(cfg, evals, wall, total_s)
+    summary = {**summarize(cfg, evals, trained.wall, total_s), **(extra or {})}
     write_atomic(out / "table2.json", json.dumps(summary, indent=2))
     write_atomic(out / "table2.md", format_markdown(summary))
     fig1 = plot_training(training, cfg, out / "figure1_training_reward.png")
@@ -535,7 +562,7 @@ def summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> dic
         "env_steps_per_run": tc.iterations * tc.num_envs,
         "eval_episodes_per_seed": tc.eval_episodes,
         "wall_s": total_s,
-        "machine": f"{platform.machine()}, {jax.device_count()} x {jax.devices()[0].platform}, "
+        "machine": f"{platform.machine()}, {jax.local_device_count()} x {jax.local_devices()[0].platform}, "
                    f"{__import__('os').cpu_count()} CPU cores visible",
     }
 

@@ -113,7 +113,7 @@ class TrainConfig:
     stagger_episodes: bool = True  # random initial episode clocks, so a batch of envs does not reset in lockstep
     chunk_steps: int = 100  # vectorised env steps per jitted chunk; host work happens between chunks
     checkpoint_every_chunks: int = 5
-    num_devices: int = 0  # data-parallel devices to shard over; 0 = all of jax.devices()
+    num_devices: int = 0  # data-parallel devices to shard over; 0 = all of this process's (jax.local_devices())
     eval_episodes: int = 10
     # The test policy: 0, the last actor (the paper); N > 0, the best of the actors after every N-th chunk
     # from `select_from` of the run (and the last), by the learner's objective on `select_episodes`

@@ -123,7 +123,9 @@ def noisy_envs_at(env_ids, iteration, num_envs: int, noise):
 
 
 def resolve_devices(num_devices: int) -> list:
-    devices = jax.devices()
+    """This process's devices (all of them for 0): under jax.distributed every process trains its own agents on
+    its own devices (`jax.devices()` would name other processes' too)."""
+    devices = jax.local_devices()
     if num_devices == 0:
         return devices
     if num_devices > len(devices):
