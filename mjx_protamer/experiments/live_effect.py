@@ -146,7 +146,7 @@ def final_actor(session: Path, learner: str):
     coach = build_learner(spec, load_checkpoint(Path(manifest["checkpoint_step_dir"]), report=lambda line: None),
                           clock=lambda: 0.0)
     coach.load_policy(session)
-    return {"params": {k: v for k, v in coach.learner.params["params"].items() if k.startswith("Dense_")}}
+    return coach.actor_params()
 
 
 def _session_facts(out: Path) -> dict:

@@ -142,6 +142,11 @@ class CoachSessionLearner(ChunkLearner):
         self.learner.opt_state = self.learner.optimizer.init(self.learner.params)
         self.commit()
 
+    def actor_params(self) -> dict:
+        """The policy's mean as a DDPG actor's parameters (the reverse of `start_from_actor`): the deterministic
+        policy a session ends with, tested like an actor."""
+        return {"params": {k: v for k, v in self.learner.params["params"].items() if k.startswith("Dense_")}}
+
     def trees(self) -> dict:
         """What a save keeps: the policy, its optimiser, the env and the random state (coach_policy/)."""
         lr = self.learner
