@@ -31,7 +31,6 @@ import copy
 from pathlib import Path
 import dataclasses
 import os
-import platform
 import statistics
 import time
 
@@ -328,10 +327,10 @@ def plot_fidelity(fidelity: dict, path: str) -> None:
 # --- the run ---------------------------------------------------------------------------------------------
 def run_env_benchmark(args) -> dict:
     """Run every measurement once; returns the JSON-able report (see the module docstring)."""
-    import jax
     import mujoco
 
     from mjx_protamer.envs.self_touch import SelfTouchEnv
+    from mjx_protamer.experiments.machine import describe
 
     quick = bool(getattr(args, "quick", False))
     sizes = _parse_batch_sizes(getattr(args, "batch_sizes", BATCH_SIZES))
@@ -393,12 +392,8 @@ def run_env_benchmark(args) -> dict:
             report["contact_fidelity_figure_error"] = f"could not write {figure}: {e}"
     report["settings"] = {"steps_per_chunk": steps, "repeats": repeats, "twin_steps": twin_steps, "quick": quick,
                           "physics": dataclasses.asdict(env.config.physics)}
-    report["machine"] = {
-        "cpu_count": os.cpu_count(), "jax_version": jax.__version__, "jax_backend": jax.default_backend(),
-        "mujoco_version": mujoco.__version__, "python": platform.python_version(),
-        "processor": platform.processor() or platform.machine(),
-        "loadavg_start": loadavg_start, "loadavg_end": os.getloadavg(),
-    }
+    report["machine"] = dict(describe(), mujoco_version=mujoco.__version__, loadavg_start=loadavg_start,
+                             loadavg_end=os.getloadavg())
     return report
 
 

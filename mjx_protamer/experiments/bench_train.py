@@ -33,12 +33,19 @@ at batch 64, `update_dot_flops` in all; 4 A + 6 C less the input-layer gradients
 then a measurement, not an assumption.
 
 `ratio_vs_sb3 = steps_per_s / sb3_steps_per_s`.
+
+`batched_trainer` (issue 40; `--skip-roofline` leaves it out): the batched trainer of `--roofline-config` (the
+main job by default) after its warm-up, with 1 seed and with 5 seeds vmapped in one program (`--roofline-seeds`),
+against its roofline: the chunk's updates at their own matmuls' time plus its env steps at the rate the env
+alone steps the same batch, both measured in the same run. `fraction_of_roofline` is the roofline's time over
+the measured time; `run_train_s_projected` is the whole run's training time at the measured pace.
+
+`machine`: JAX's backend, the device kind (which GPU, if any), cores and load (experiments/machine.py).
 """
 
 from __future__ import annotations
 
 import argparse
-import platform
 import statistics
 import time
 
@@ -53,6 +60,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vectorised steps per timed batched run")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--skip-sb3", action="store_true", help="do not run Stable-Baselines3")
+    parser.add_argument("--roofline-config", default="configs/pretrain.yaml",
+                        help="the batched run whose trainer is put against its roofline (default: the main job)")
+    parser.add_argument("--roofline-set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a value of --roofline-config (repeatable)")
+    parser.add_argument("--roofline-seeds", default="1,5",
+                        help="seed counts to time the batched trainer at, vmapped in one program (default 1,5)")
+    parser.add_argument("--roofline-chunks", type=int, default=3, help="timed chunks per repeat (default 3)")
+    parser.add_argument("--skip-roofline", action="store_true", help="do not time the batched trainer")
     parser.add_argument("--backends", default="mjx,native",
                         help="physics backends to train on side by side (self_touch; default mjx,native; '' for none)")
 
@@ -188,6 +203,89 @@ def _time_jax(env, config, repeats: int) -> dict:
     return {"median": statistics.median(rates), "runs": rates, "compile_s": compile_s}
 
 
+def _warm_chunks(config) -> int:
+    """Chunks that take a trainer past its warm-up (random actions, no updates), plus one for the compile."""
+    iterations = config.train.warmup_iterations
+    return -(-iterations // config.train.chunk_steps) + 1
+
+
+def time_batched_trainer(config, seeds: int, chunks: int, repeats: int) -> dict:
+    """Seconds per chunk of the batched trainer of `config` after its warm-up, `seeds` vmapped in one program
+    (the way `reproduce table2` runs them; 1: the jitted chunk `pretrain` runs), median of `repeats` runs of
+    `chunks` chunks; the physics backend is the one the run would use."""
+    import jax
+    import numpy as np
+
+    from mjx_protamer.agents.ddpg.train import make_train
+    from mjx_protamer.experiments.env_factory import make_env
+
+    trainer = make_train(config, make_env(config))
+    if seeds == 1:
+        state, chunk = trainer.init(jax.random.PRNGKey(0)), trainer.train_chunk
+        step = lambda s: chunk(s, None)
+    else:
+        keys = jax.vmap(jax.random.PRNGKey)(np.arange(seeds, dtype=np.uint32))
+        state = jax.jit(jax.vmap(trainer.init))(keys)
+        vchunk = jax.jit(jax.vmap(lambda s: trainer.chunk_body(s, None)[:2]), donate_argnums=0)
+        step = vchunk
+    t0 = time.perf_counter()
+    for _ in range(_warm_chunks(config)):
+        state, metrics = step(state)
+    jax.block_until_ready(metrics)
+    warm_s = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for _ in range(chunks):
+            state, metrics = step(state)
+        jax.block_until_ready(metrics)
+        times.append((time.perf_counter() - t) / chunks)
+    return {"chunk_s": statistics.median(times), "chunk_s_runs": times, "warm_up_and_compile_s": warm_s}
+
+
+def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
+    """The batched trainer against its roofline (issue 40): a chunk's updates at the time their own matmuls take
+    (`update_dot_shapes` at the run's networks and batch, chained in one jitted scan, measured now) plus its env
+    steps at the rate the env alone steps the same batch (same backend, same scan), measured now. The fraction
+    is roofline time over measured time: 1.0 would mean nothing but the update's arithmetic and the physics
+    costs anything. Keyed by the number of vmapped seeds."""
+    from mjx_protamer.experiments.bench_env import _bench_env
+    from mjx_protamer.experiments.env_factory import make_env
+
+    tc, dc = config.train, config.ddpg
+    env = make_env(config)
+    shapes = update_dot_shapes(env.observation_size, env.action_size, dc.actor_hidden, dc.critic_hidden,
+                               dc.batch_size)
+    dot_s = measure_dot_chain_seconds(shapes, repeats=repeats)
+    out = {"config": {"num_envs": tc.num_envs, "updates_per_step": tc.updates_per_step,
+                      "chunk_steps": tc.chunk_steps, "batch_size": dc.batch_size, "iterations": tc.iterations,
+                      "backend": getattr(getattr(config, "env", None), "backend", None)},
+           "update_matmul_s": dot_s, "seeds": {}}
+    for seeds in seed_counts:
+        worlds = tc.num_envs * seeds
+        env_rate = _bench_env(env, worlds, tc.chunk_steps, repeats)["steps_per_s"]
+        timed = time_batched_trainer(config, seeds, chunks, repeats)
+        updates = tc.chunk_steps * tc.updates_per_step * seeds
+        update_s, env_s = updates * dot_s, tc.chunk_steps * worlds / env_rate
+        roofline_s = update_s + env_s
+        out["seeds"][str(seeds)] = dict(
+            timed, env_steps_per_s_alone=env_rate, roofline_chunk_s=roofline_s, roofline_update_s=update_s,
+            roofline_env_s=env_s, fraction_of_roofline=roofline_s / timed["chunk_s"],
+            updates_per_s=updates / timed["chunk_s"], env_steps_per_s=tc.chunk_steps * worlds / timed["chunk_s"],
+            run_train_s_projected=tc.num_chunks * timed["chunk_s"], run_train_s_at_roofline=tc.num_chunks * roofline_s)
+    return out
+
+
+def _parse_seed_counts(text: str) -> list[int]:
+    try:
+        counts = [int(c) for c in str(text).split(",") if c.strip()]
+    except ValueError:
+        counts = []
+    if not counts or any(c < 1 for c in counts):
+        raise ValueError(f"--roofline-seeds must be comma-separated positive integers, got {text!r}")
+    return counts
+
+
 def _make_twin(config):
     """The NumPy/Gymnasium twin of the env the JAX side trains on (same env config)."""
     if config.env_name == "toy":
@@ -228,6 +326,7 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
 
     from mjx_protamer.experiments.bench_env import _bench_env
     from mjx_protamer.experiments.env_factory import make_env, resolve_backend
+    from mjx_protamer.experiments.machine import describe
 
     single = _config(args.env, 1, args.steps)
     env = make_env(single)
@@ -251,9 +350,7 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
         "updates_per_env_step_single": 1,
         "updates_per_vectorised_step_batched": 1,
         "repeats": args.repeats,
-        "jax_backend": jax.default_backend(),
-        "devices": len(jax.devices()),
-        "machine": platform.processor() or platform.machine(),
+        "machine": describe(),
     }
 
     # The single-env roofline: matmul peak and one env step, measured now, on this machine.
@@ -286,6 +383,15 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
         rates = result["batched_steps_per_s"]
         result["ratio_batched_native_vs_mjx"] = (rates["native"] / rates["mjx"]
                                                  if {"native", "mjx"} <= rates.keys() else None)
+    if not getattr(args, "skip_roofline", False):
+        from mjx_protamer.agents.ddpg.config import PretrainConfig
+        from mjx_protamer.config import load_config
+        from mjx_protamer.experiments.env_factory import with_resolved_backend
+
+        counts = _parse_seed_counts(args.roofline_seeds)
+        config = with_resolved_backend(load_config(PretrainConfig, args.roofline_config, args.roofline_set),
+                                       announce=False)
+        result["batched_trainer"] = batched_roofline(config, counts, args.roofline_chunks, args.repeats)
     if not args.skip_sb3:
         sb3 = _time_sb3(single, args.sb3_steps, args.repeats)
         result.update(sb3_steps_per_s=sb3["median"], sb3_runs=sb3["runs"], sb3_torch_threads=sb3["torch_threads"],

@@ -75,3 +75,26 @@ def test_update_dot_shapes_are_the_matmuls_autodiff_lowers():
     listed = collections.Counter(tuple(sorted((m, n))) + (k,)
                                  for m, k, n in update_dot_shapes(obs_n, act_n, (400, 300), (400, 300), batch))
     assert lowered == listed
+
+
+def test_batched_roofline_reports_one_and_vmapped_seeds(tmp_path):
+    """`bench train`'s batched-trainer section times a run's chunk after its warm-up, alone and with seeds vmapped,
+    and splits its roofline into the updates' matmul time and the env's own time (a tiny toy run)."""
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.config import load_config
+    from mjx_protamer.experiments.bench_train import batched_roofline
+
+    config = load_config(PretrainConfig, None, [
+        "env_name=toy", "train.num_envs=8", "train.episode_length=25", "train.total_env_steps=4000",
+        "train.warmup_env_steps=80", "train.updates_per_step=2", "train.chunk_steps=10",
+        "ddpg.actor_hidden=[32,32]", "ddpg.critic_hidden=[32,32]", "ddpg.batch_size=16", "ddpg.replay_size=1000"])
+    r = batched_roofline(config, [1, 2], chunks=1, repeats=1)
+    assert r["config"]["updates_per_step"] == 2 and r["update_matmul_s"] > 0
+    assert set(r["seeds"]) == {"1", "2"}
+    for seeds, s in r["seeds"].items():
+        n = int(seeds)
+        assert s["roofline_chunk_s"] == pytest.approx(s["roofline_update_s"] + s["roofline_env_s"])
+        assert s["roofline_update_s"] == pytest.approx(10 * 2 * n * r["update_matmul_s"])
+        assert s["fraction_of_roofline"] == pytest.approx(s["roofline_chunk_s"] / s["chunk_s"])
+        assert s["updates_per_s"] * s["chunk_s"] == pytest.approx(10 * 2 * n)
+        assert s["run_train_s_projected"] == pytest.approx(config.train.num_chunks * s["chunk_s"])
