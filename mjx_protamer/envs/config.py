@@ -15,9 +15,9 @@ ALL_JOINTS = tuple(f"{s}_{j}" for s in _SIDES for j in list(body.ARM_JOINTS) + [
 
 @dataclasses.dataclass(frozen=True)
 class TouchConfig:
-    spacing_hand: float = 0.007
-    spacing_fingers: float = 0.002
-    spread_factor: float = 1.5
+    spacing_hand: float = 0.007  # m between the palm's sensor points (7 mm: 148 sensors, as in the reference)
+    spacing_fingers: float = 0.002  # m between the finger capsule's sensor points (2 mm: 1,174 sensors)
+    spread_factor: float = 1.5  # a contact's force is spread over the sensors within this many spacings (1.5: about 7)
 
     def validate(self) -> None:
         check(0.001 <= self.spacing_hand <= 0.03, "spacing_hand", f"must be in [0.001, 0.03] m, got {self.spacing_hand}")
@@ -38,24 +38,26 @@ class RewardConfig:
     features squashed by `novelty_force_scale` and clipped, so force chatter cannot outweigh touching.
     """
 
-    contact: float = 1.0
-    novelty: float = 1.0
-    region: float = 1.0
-    movement: float = 1.0
-    energy: float = 1.0
-    joint_limit: float = 1.0
-    contact_scale: float = 1.0
+    contact: float = 1.0  # weight of the contact term (docs/environment.md, "Reward", has every term's formula)
+    novelty: float = 1.0  # weight of the novelty term: the change of the touch features since the last step
+    region: float = 1.0  # weight of the region term: region_new when a region is newly touched, else region_stale
+    movement: float = 1.0  # weight of the movement-band term (movement_penalty outside [speed_low, speed_high])
+    energy: float = 1.0  # weight of the energy term: -energy_coef x the squared actuator forces
+    joint_limit: float = 1.0  # weight of the joint-limit term: -limit_coef x the actions past limit_threshold
+    contact_scale: float = 1.0  # the contact term is contact_scale x tanh(contact_gain x sum |touch features|)
+    # 1/N: 2 makes a 1 N touch earn 0.96 of contact_scale (the paper preset's 0.05 is still rising at 20 N)
     contact_gain: float = 2.0
     novelty_force_scale: float = 1.0  # N; features enter novelty as tanh(x / scale); 0: raw features (paper)
     novelty_clip: float = 1.0  # novelty is at most this; 0: unclipped (paper)
-    region_new: float = 0.3
-    region_stale: float = -1.0
-    speed_low: float = 1.0
-    speed_high: float = 3.0
+    region_new: float = 0.3  # the region term on a step whose touched regions are not a subset of the last step's
+    region_stale: float = -1.0  # the region term on every other step
+    speed_low: float = 1.0  # rad/s: the movement band's lower end (arm joint-speed norm, env.speed_joints)
+    speed_high: float = 3.0  # rad/s: the movement band's upper end
+    # the movement term outside the band (below speed_low or above speed_high), 0 inside it
     movement_penalty: float = -0.5
-    energy_coef: float = 0.001
-    limit_threshold: float = 0.8
-    limit_coef: float = 0.8
+    energy_coef: float = 0.001  # per N^2 of actuator force, summed over the actuators
+    limit_threshold: float = 0.8  # |action| past this (of the servo range, 1) is penalised: near the joint limits
+    limit_coef: float = 0.8  # per unit of |action| past limit_threshold, summed over the action dimensions
     # Pays sum over touched regions of (1 - familiarity): a region is worth touching while it is
     # unfamiliar. Zero unless the env keeps a familiarity trace (EnvConfig.habituation_s > 0).
     habituation: float = 1.0
@@ -95,12 +97,18 @@ REWARD_TERMS = ("contact", "novelty", "region", "movement", "energy", "joint_lim
 
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
+    # touch sensors read per hand part: the k nearest the contact point (observation 4 x (k + 3) touch dims)
     k: int = 10
-    episode_length: int = 1000
+    episode_length: int = 1000  # env steps per episode (5 s at 200 Hz); train.episode_length must equal it
+    # joints whose angles enter the observation
     qpos_joints: tuple[str, ...] = tuple(f"{s}_{j}" for s in _SIDES for j in _ARM + ("wrist_flexion", "fingers"))
+    # joints whose speeds enter the observation
     qvel_joints: tuple[str, ...] = tuple(f"{s}_{j}" for s in _SIDES for j in _ARM + ("wrist_flexion", "fingers"))
+    # actuators whose forces enter the observation
     torque_actuators: tuple[str, ...] = tuple(f"{s}_{j}" for s in _SIDES for j in _ARM)
+    # joints whose speed norm is the arm speed: the movement band's and the freeze metric's
     speed_joints: tuple[str, ...] = tuple(f"{s}_{j}" for s in _SIDES for j in _ARM)
+    # rad/s: a step with the arm speed below this counts as frozen (the freeze_ratio metric, teachers)
     freeze_speed: float = 1.0
     # Time constant (s) of the low-pass between the action and the servo targets (model.next_ctrl); 0 is
     # the paper's env, where targets jump to each 5 ms action. See docs/experiments.md for why 0.1 s.
@@ -118,15 +126,19 @@ class EnvConfig:
     # tapped or pressed forever earns as much as a tour of the body. 0 switches it off (the paper's
     # obs; run_loader reads a saved run that predates the field as 0).
     habituation_s: float = 0.25
+    # s: time constant of the familiarity's decay while a region is not touched (see habituation_s)
     recovery_s: float = 10.0
+    # each start state of the reset pool is the settled pose after this many random servo targets (200 Hz steps;
+    # envs/model.py says why a pool)
     reset_noise_steps: int = 10
+    # std of those targets around the rest pose, as a fraction of each servo's half range
     reset_noise_scale: float = 0.1
-    reset_pool_size: int = 256
-    reset_pool_seed: int = 0
+    reset_pool_size: int = 256  # start states computed once, natively, when the model is built; a reset draws one
+    reset_pool_seed: int = 0  # seed of the NumPy generator that makes the reset pool
     physics: PhysicsConfig = PhysicsConfig()
     touch: TouchConfig = TouchConfig()
     reward: RewardConfig = RewardConfig()
-    backend: str = "auto"
+    backend: str = "auto"  # physics: auto, mjx or native (BACKENDS above: auto is native when JAX runs on the CPU)
 
     def validate(self) -> None:
         check(self.backend in BACKENDS, "backend", f"must be one of {', '.join(BACKENDS)}, got {self.backend!r}")

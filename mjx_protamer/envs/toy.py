@@ -25,7 +25,8 @@ from mjx_protamer.envs.base import State
 
 @dataclass(frozen=True)
 class ToyEnvConfig:
-    max_step: float = 0.15
+    max_step: float = 0.15  # the point moves max_step x action per step (arena units; the arena is [-1, 1]^2)
+    # within this distance of the goal the point counts as reaching it (the reach term, self_contact)
     reach_radius: float = 0.1
     reward_weights: tuple[float, ...] = (1.0, 0.05, 0.5)  # distance, effort, reach
 

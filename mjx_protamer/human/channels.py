@@ -54,14 +54,16 @@ MEASURED_IN = "docs/results/voice_channels.json"  # where the prosody and speech
 
 @dataclasses.dataclass(frozen=True)
 class ChannelConfig:
+    # the channel the feedback comes through; its PRESETS fill the fields left null
     kind: Literal["keyboard", "prosody", "speech"] = "keyboard"
-    delay_mean_s: float | None = None  # None: the kind's preset
-    delay_std_s: float | None = None
+    delay_mean_s: float | None = None  # reaction delay mean (s); None: the kind's preset
+    delay_std_s: float | None = None  # reaction delay std; None: the kind's preset
+    # the fastest reaction (the delay is max(delay_min_s, Normal(mean, std))); None: the kind's preset
     delay_min_s: float | None = None
     duration_s: float | None = None  # key press 0; an utterance's length (t_end - t_start)
     latency_s: float | None = None  # processing after t_end before the event reaches the queue
     gain: float = 2.0  # prosody: value = tanh(gain * score + noise)
-    noise_std: float | None = None  # prosody; None: the kind's preset
+    noise_std: float | None = None  # prosody: the std of the noise in the value above; None: the kind's preset
     # speech: P(recognised | intended), rows intended (+1, 0, -1), columns recognised (+1, 0, -1); None: preset
     confusion: tuple[float, ...] | None = None
 

@@ -47,11 +47,13 @@ from mjx_protamer.human.events import FeedbackEvent
 
 @dataclasses.dataclass(frozen=True)
 class CreditConfig:
+    # which steps an event is about: channel (the channel's delay distribution), step_window (the authors' code),
+    # time_window (Deep TAMER); the module docstring says each
     scheme: Literal["channel", "step_window", "time_window"] = "channel"
     window_steps: int = 15  # step_window: how many steps back
     decay: float = 0.9  # step_window: weight 0.9^i for the i-th step back
     delay_min_s: float = 0.2  # time_window: human delay ~ Uniform[delay_min_s, delay_max_s]
-    delay_max_s: float = 4.0
+    delay_max_s: float = 4.0  # time_window: the slowest human delay (see delay_min_s)
     min_interval_steps: int = 5  # at most one accepted event per this many steps
     # a step the teacher watched and said nothing about (no event arrived in its credit window) is a row with
     # target 0 weighing this many events (an event's credit weights sum to 1); 0: events alone, as Deep TAMER.

@@ -34,8 +34,9 @@ class FeedbackConfig:
     teacher: TeacherConfig = dataclasses.field(default_factory=TeacherConfig)
     dt: float = 0.005  # presentation period of one env step (s): the env's control period in real time
     watch_env: int = 0  # the env of the batch the teacher (or human) watches
+    # a live session's feedback queue (events waiting for the learner; more are dropped and logged)
     queue_size: int = 256
-    seed: int = 0
+    seed: int = 0  # a live session's host streams (teacher, credit draws, the simulated speaker's voice)
 
     def validate(self) -> None:
         check(self.dt > 0, "dt", f"must be > 0, got {self.dt}")

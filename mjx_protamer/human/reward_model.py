@@ -29,10 +29,10 @@ from mjx_protamer.config import check
 
 @dataclasses.dataclass(frozen=True)
 class RewardModelConfig:
-    hidden: tuple[int, ...] = (256, 256)
-    learning_rate: float = 1e-3
-    buffer_size: int = 10_000
-    batch_size: int = 64
+    hidden: tuple[int, ...] = (256, 256)  # hidden layer widths of the reward model's MLP (r_hat(s, a))
+    learning_rate: float = 1e-3  # Adam step size
+    buffer_size: int = 10_000  # credited rows kept (the oldest are overwritten)
+    batch_size: int = 64  # rows per replay minibatch
     updates_per_feedback: int = 1  # gradient steps on the new rows when an event is credited
     replay_every: int = 10  # env steps between replay minibatches (0: never)
     replay_min_rows: int = 64  # no replay before the buffer holds this many rows
@@ -44,20 +44,20 @@ class RewardModelConfig:
     # the teacher's silences, keep theirs). A teacher whose learner complies praises far more than it scolds,
     # and a model fitted to that rates the scolded states far above -1 (near 0: measured, docs/experiments.md).
     balance_signs: bool = False
-    balance_max: float = 10.0
+    balance_max: float = 10.0  # the cap on balance_signs' reweighting (see balance_signs)
     # An ensemble of `ensemble` MLPs (own initialisations, the same minibatches, each fitted to the labels), and
     # r_hat = their mean - `pessimism` x their standard deviation: where the members disagree (states far from
     # any label) r_hat is lowered, so the actor is not drawn to states the model over-rates by chance
     # (Lakshminarayanan et al. 2017, deep ensembles; pessimism as in conservative model-based RL).
     ensemble: int = 1
-    pessimism: float = 0.0
+    pessimism: float = 0.0  # r_hat = ensemble mean - pessimism x std (see ensemble); 0: the mean
     # Step-size decay over a batched run (experiments/feedback_train.py; step_size.decay_scale), as DDPG's:
     # 1 until `lr_decay_from` of the run, then linear to `lr_final_fraction`. Screened to shrink r_hat's spread
     # within one score on a compliant learner's states; it did not, that spread is not the optimiser's noise
     # (docs/experiments.md, "a step-size decay for it"), so no config sets it. A live session is open-ended and
     # runs at the full rate (commands/feedback.py).
     lr_final_fraction: float = 1.0
-    lr_decay_from: float = 0.5
+    lr_decay_from: float = 0.5  # the share of the run before the decay starts (see lr_final_fraction)
     # The observation enters as asinh(obs): about obs near 0, about log(2 |obs|) far out. The touch features are
     # forces in newtons (0 to about 50 N, std up to 9 N); raw, a 20 N press by one hand swamps a 0.5 N
     # touch by the other, and a rule on whether each hand touches sees the two as one state

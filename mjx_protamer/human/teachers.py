@@ -66,10 +66,13 @@ from mjx_protamer.human.events import FeedbackEvent
 
 @dataclasses.dataclass(frozen=True)
 class Clause:
+    # what the clause reads: a reward term's name, region:NAME (a body region touched), regions_touched, obs:I,
+    # action:I or obs_norm:A:B[,C:D] (the norm of observation slices)
     signal: str
+    # what the teacher thinks of a step where the condition holds, in [-1, 1] (summed over clauses, clipped)
     value: float
-    above: float | None = None
-    below: float | None = None
+    above: float | None = None  # the condition holds while above < signal < below (null: no bound on that side)
+    below: float | None = None  # see above
     sustain: int = 1  # consecutive steps the condition must hold
 
     def validate(self) -> None:
@@ -109,13 +112,14 @@ LATERAL_RULE = (
 
 @dataclasses.dataclass(frozen=True)
 class TeacherConfig:
+    # the hidden rule: clauses whose values sum to the score of a step (SELF_TOUCH_RULE, LATERAL_RULE above)
     rule: tuple[Clause, ...] = SELF_TOUCH_RULE
     threshold: float = 0.5  # |score| needed to consider giving feedback
-    give_rate: float = 0.5
-    min_gap_steps: int = 40
-    flip_prob: float = 0.05
-    silence_fraction: float = 0.1
-    silence_mean_s: float = 2.0
+    give_rate: float = 0.5  # probability of giving feedback on a step that is eligible for it
+    min_gap_steps: int = 40  # at least this many steps between two pieces of feedback (40: 0.2 s)
+    flip_prob: float = 0.05  # probability that the feedback's sign is the wrong one (a teacher's mistake)
+    silence_fraction: float = 0.1  # share of the time the teacher looks away and says nothing (its silent mode)
+    silence_mean_s: float = 2.0  # s: the mean length of a silent spell
     channel: ChannelConfig = dataclasses.field(default_factory=ChannelConfig)
 
     def validate(self) -> None:

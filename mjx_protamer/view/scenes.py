@@ -34,12 +34,10 @@ def step_seconds(run_config) -> float:
 def prepare_gl_for(checkpoint) -> str | None:
     """Before JAX starts its threads (the probe runs child processes): choose the OpenGL backend when the
     run at `checkpoint` is a self-touch run. Returns the backend, or None for a toy run."""
-    from mjx_protamer.config import read_raw
-    from mjx_protamer.experiments.run_loader import CONFIG_NAME, resolve_checkpoint
+    from mjx_protamer.experiments.run_loader import read_run_config, resolve_checkpoint
     from mjx_protamer.view.gl import choose_backend
 
-    run_dir = resolve_checkpoint(checkpoint)[0]
-    raw = read_raw(run_dir / CONFIG_NAME)  # the one loader: its size limit and one-line errors
-    if raw.get("env_name") == "toy":
+    # the run's config as `load_run` reads it (validated, no JAX work, no mujoco import before the choice)
+    if read_run_config(resolve_checkpoint(checkpoint)[0]).env_name == "toy":
         return None
     return choose_backend()

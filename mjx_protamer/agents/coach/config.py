@@ -9,17 +9,19 @@ from mjx_protamer.config import check
 
 @dataclass(frozen=True)
 class CoachConfig:
+    # hidden layer widths of the Gaussian policy (finetune --coach-init actor takes the checkpoint actor's)
     hidden: tuple[int, ...] = (64, 64)
     window: int = 10  # L: steps per window (eligibility trace length)
-    trace_decay: float = 0.35  # lambda
+    trace_decay: float = 0.35  # lambda: the eligibility trace weighs the j-th step before a window's last lambda^j
     human_delay_steps: int = 1  # feedback at step k judges the window ending at step k - delay
-    learning_rate: float = 2.5e-4
-    entropy_coef: float = 1e-3
+    learning_rate: float = 2.5e-4  # Adam step size
+    entropy_coef: float = 1e-3  # weight of the policy's entropy bonus in the loss (keeps it exploring)
+    # the policy's initial log standard deviation (a learned parameter per action dimension)
     init_log_std: float = -0.5
-    min_log_std: float = -3.0
-    replay_size: int = 1000  # windows
+    min_log_std: float = -3.0  # the log std is floored here when acting and in the loss
+    replay_size: int = 1000  # windows kept (the oldest are overwritten)
     batch_windows: int = 16  # windows per minibatch (16-32 in the paper); the newest is always included
-    updates_per_feedback: int = 1
+    updates_per_feedback: int = 1  # gradient steps per feedback event
     activation: str = "tanh"  # hidden layers; "relu" to start from a DDPG actor (finetune --coach-init actor)
 
     def validate(self) -> None:

@@ -19,12 +19,13 @@ from mjx_protamer.envs.toy import ToyEnvConfig
 
 @dataclass(frozen=True)
 class NoiseConfig:
+    # exploration noise added to the actor's action: ou (Ornstein-Uhlenbeck), gaussian or none
     kind: Literal["ou", "gaussian", "none"] = "ou"
     # Ornstein-Uhlenbeck with dt = 1: x' = x + theta (mu - x) + sigma N(0, 1), one process per env and per
     # action dim, reset at episode start. Stationary std = sigma / sqrt(2 theta - theta^2) (1.14 here).
     theta: float = 0.15
     sigma: float = 0.6  # for "gaussian": the std of the independent per-step noise
-    mu: float = 0.0
+    mu: float = 0.0  # the OU process's mean (0: noise around the actor's action)
     # The last `quiet_fraction` of the envs act with the deterministic actor (no noise added). A policy
     # trained only on noisy behaviour is judged on states its critic never saw: the deterministic actor of
     # the self-touch env froze once the noise was off (issue 8). Quiet envs put the test policy's own states
@@ -48,24 +49,25 @@ class NoiseConfig:
 
 @dataclass(frozen=True)
 class DDPGConfig:
-    actor_hidden: tuple[int, ...] = (400, 300)
+    actor_hidden: tuple[int, ...] = (400, 300)  # the actor MLP's hidden layer widths (the paper's 400-300)
     critic_hidden: tuple[int, ...] = (400, 300)  # the action enters at the second layer
-    actor_lr: float = 1e-3
-    critic_lr: float = 1e-3
-    gamma: float = 0.99
-    tau: float = 0.001
-    batch_size: int = 64
+    actor_lr: float = 1e-3  # Adam step size of the actor
+    critic_lr: float = 1e-3  # Adam step size of the critic
+    gamma: float = 0.99  # discount per env step
+    tau: float = 0.001  # soft target update: target = tau x online + (1 - tau) x target, every update
+    batch_size: int = 64  # replay rows per gradient update
+    # transitions the replay keeps, over all envs (split among devices; the oldest are overwritten)
     replay_size: int = 100_000
     # Sample-time reward: alpha * (reward_terms @ env weights) + beta * human_reward_fn(params, obs, action).
     reward_alpha: float = 1.0
-    reward_beta: float = 0.1
+    reward_beta: float = 0.1  # beta of the sample-time reward above: the weight of the human reward model's r_hat
     actor_preact_coef: float = 0.0  # penalty on the actor's pre-tanh activations (losses.actor_loss)
     actor_preact_free: float = 0.0  # pre-tanh magnitude the penalty leaves free (0: a pull toward 0 everywhere)
     # Step-size decay over a run (actor and critic): 1 until `lr_decay_from` of the run's iterations, then
     # linear to `lr_final_fraction` of the rate at the last one. 1.0 = constant (the paper). A fine-tuning
     # session is open-ended and always runs at the full rate (commands/feedback.py).
     lr_final_fraction: float = 1.0
-    lr_decay_from: float = 0.5
+    lr_decay_from: float = 0.5  # the share of the run before the step-size decay starts (see lr_final_fraction)
     # Action biasing (losses.actor_loss): the actor also climbs `human_actor_coef * r_hat(s, mu(s))` of the human
     # reward model, beside the critic's Q (whose scale is a return: tens per unit of step reward). 0: the paper's
     # DDPG, where r_hat reaches the policy only through `reward_beta` and the critic.
@@ -104,23 +106,23 @@ class TrainConfig:
     """Defaults: the batched pretraining default (configs/pretrain.yaml); the paper's single-env setting is
     configs/paper_single_env.yaml."""
 
-    seed: int = 0
-    num_envs: int = 32
-    episode_length: int = 1000
+    seed: int = 0  # the run's seed: networks, noise, envs, replay draws (test episodes use seeds derived from it)
+    num_envs: int = 32  # envs stepped together, in one batch (vmapped)
+    episode_length: int = 1000  # env steps per episode; must equal env.episode_length for the self-touch env
     total_env_steps: int = 256_000  # over all envs; rounded up to whole chunks
     warmup_env_steps: int = 4_000  # uniform random actions, no updates, before learning starts
     updates_per_step: int = 2  # gradient updates per vectorised env step (one step of every env)
     stagger_episodes: bool = True  # random initial episode clocks, so a batch of envs does not reset in lockstep
     chunk_steps: int = 100  # vectorised env steps per jitted chunk; host work happens between chunks
-    checkpoint_every_chunks: int = 5
+    checkpoint_every_chunks: int = 5  # a checkpoint every this many chunks (and after the last)
     num_devices: int = 0  # data-parallel devices to shard over; 0 = all of this process's (jax.local_devices())
-    eval_episodes: int = 10
+    eval_episodes: int = 10  # deterministic test episodes at the end of a run (eval.json)
     # The test policy: 0, the last actor (the paper); N > 0, the best of the actors after every N-th chunk
     # from `select_from` of the run (and the last), by the learner's objective on `select_episodes`
     # validation episodes (agents/ddpg/selection.py says why)
     select_every_chunks: int = 0
-    select_from: float = 0.5
-    select_episodes: int = 4
+    select_from: float = 0.5  # the share of the run before snapshots are validated (see select_every_chunks)
+    select_episodes: int = 4  # validation episodes per snapshot (see select_every_chunks)
 
     def validate(self) -> None:
         check_seed(self.seed, "seed")
@@ -179,7 +181,7 @@ def batched_ddpg() -> DDPGConfig:
 class PretrainConfig:
     """A whole `protamer pretrain` run: which env (with its config), the learner, the run settings."""
 
-    env_name: Literal["self_touch", "toy"] = "self_touch"
+    env_name: Literal["self_touch", "toy"] = "self_touch"  # the infant (the env section) or the 2-D point (toy)
     env: EnvConfig = field(default_factory=EnvConfig)  # the self-touch env (used when env_name is self_touch)
     toy: ToyEnvConfig = field(default_factory=ToyEnvConfig)
     ddpg: DDPGConfig = field(default_factory=batched_ddpg)
