@@ -24,7 +24,6 @@ import errno
 import gc
 import hashlib
 import json
-import os
 import shutil
 import sys
 import time
@@ -35,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import orbax.checkpoint as ocp
 
+from mjx_protamer.atomic import write_atomic
 from mjx_protamer.errors import CheckpointDamaged, CheckpointError
 
 MANIFEST = "manifest.json"
@@ -96,21 +96,6 @@ def _describe(named: dict) -> dict:
 
 def step_dir(mngr: ocp.CheckpointManager, step: int) -> Path:
     return Path(mngr.directory) / str(step)
-
-
-def write_atomic(path: Path, data: str | bytes) -> None:
-    """Write a file so that a kill at any moment leaves the old or the new content, never a torn one."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data.encode() if isinstance(data, str) else data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    fd = os.open(path.parent, os.O_RDONLY)  # the rename itself is durable once the directory is synced
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def _file_sha256(path: Path) -> str:

@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import yaml
 
+from mjx_protamer.atomic import write_atomic
 from mjx_protamer.config import ConfigError, read_raw, to_dict
 from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate, validation_seed
@@ -83,9 +84,9 @@ def run_pretrain(
     select = tc.select_every_chunks > 0
     ckpt = runner.Checkpointer([ckpt_dir] + ([out / "checkpoints_feedback"] if fb is not None else [])
                                + ([out / SELECTED_DIR] if select else []), tc.checkpoint_every_chunks)
-    checkpoints.write_atomic(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
+    write_atomic(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
     if fb is not None:
-        checkpoints.write_atomic(out / "feedback_config.yaml", yaml.safe_dump(
+        write_atomic(out / "feedback_config.yaml", yaml.safe_dump(
             {"kind": feedback.kind, "feedback": to_dict(feedback.config), "batched": to_dict(feedback.batched)},
             sort_keys=False).encode())
     # The runner's state: one part per checkpoint directory.
@@ -155,7 +156,7 @@ def run_pretrain(
 
         fb_log.note(event="end", chunk=chunk, totals=[float(x) for x in jax.device_get(fb_state.totals)])
         fb_log.close()
-        checkpoints.write_atomic(out / "reward_model.msgpack", reward_model_bytes(fb_state))
+        write_atomic(out / "reward_model.msgpack", reward_model_bytes(fb_state))
 
     result = {
         "out_dir": str(out),
@@ -189,7 +190,7 @@ def run_pretrain(
             last = evaluate(config, env, state.actor_params, tc.eval_episodes, eval_seed(config))
             summary["selection"] = dict(result["selection"], last_actor={
                 k: last[k] for k in ("unique_regions", "freeze_ratio", "contact_rate", "episode_return")})
-        checkpoints.write_atomic(out / "eval.json", json.dumps(summary, indent=2).encode())
+        write_atomic(out / "eval.json", json.dumps(summary, indent=2).encode())
         result["eval"] = summary
         result["eval_json"] = str(out / "eval.json")
     ckpt.close()
@@ -271,7 +272,7 @@ def _with_selection(step, config, env, fb, fb_params, human_reward_fn, human_par
             kept = keep(kept, actor, score, chunk[0])
             candidates.append({"chunk": chunk[0], "score": float(score),
                                "freeze_ratio": float(jnp.mean(speed < config.env.freeze_speed))})
-            checkpoints.write_atomic(path, json.dumps({"candidates": candidates}, indent=2).encode())
+            write_atomic(path, json.dumps({"candidates": candidates}, indent=2).encode())
         return new + (kept,), metrics, extra
 
     return selecting_step, candidates
@@ -300,4 +301,4 @@ def _truncate_feedback_log(path: Path, last_step: int) -> None:
     from mjx_protamer.human.queue import FeedbackLog
 
     keep = [r for r in FeedbackLog.records(path) if r.get("step") is None or r["step"] < last_step]
-    checkpoints.write_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in keep).encode())
+    write_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in keep).encode())
