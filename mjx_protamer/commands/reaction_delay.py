@@ -164,6 +164,6 @@ def _plot(fit, touch: str, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         with replacing(path) as tmp:
-            fig.savefig(tmp)
+            fig.savefig(tmp, format="png")
     finally:
         plt.close(fig)

@@ -144,6 +144,28 @@ def save(mngr: ocp.CheckpointManager, step: int, state) -> None:
     write_atomic(step_dir(mngr, step) / MANIFEST, json.dumps(manifest, indent=1))
 
 
+def save_model(directory: str | Path, tree) -> None:
+    """Save a model that is written once, at the end of a run (a reward model, a condition's agents), as step 0
+    of `directory`, replacing what an unfinished earlier attempt left there (a kill, a full disk)."""
+    directory = Path(directory)
+    if (directory / "0").exists():
+        shutil.rmtree(directory / "0")
+    mngr = manager(directory, max_to_keep=1)
+    try:
+        save(mngr, 0, tree)
+    finally:
+        mngr.close()
+
+
+def load_model(directory: str | Path, like):
+    """The model `save_model` wrote into `directory`, checked as `restore` checks a step."""
+    mngr = manager(directory)
+    try:
+        return restore(mngr, 0, like)
+    finally:
+        mngr.close()
+
+
 def _read_manifest(directory: Path) -> dict:
     path = directory / MANIFEST
     if not path.is_file():

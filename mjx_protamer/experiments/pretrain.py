@@ -22,7 +22,7 @@ import yaml
 
 from mjx_protamer.atomic import write_atomic
 from mjx_protamer.config import ConfigError, read_raw, to_dict
-from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner
+from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner, saved_reward_model
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate, validation_seed
 from mjx_protamer.experiments.run_loader import CONFIG_NAME, SELECTED_DIR
 
@@ -43,8 +43,9 @@ def run_pretrain(
     `max_chunks` stops after that many chunks of this call (as a kill would; used to test resume).
     `feedback`: None, or a `FeedbackSetup` (simulated teachers + DeepTAMER inside the jitted chunk, see
     `experiments.feedback_train`); then the CSV/TensorBoard rows gain feedback counts and r_hat stats, every
-    event goes to `feedback.jsonl` (append + fsync, `FeedbackLog`), the reward model to `reward_model.msgpack`
-    and the feedback carry to `checkpoints_feedback/` (so `resume` is exact with feedback too).
+    event goes to `feedback.jsonl` (append + fsync, `FeedbackLog`), the reward model to `reward_model/`
+    (`saved_reward_model`) and the feedback carry to `checkpoints_feedback/` (so `resume` is exact with feedback
+    too).
     """
     from mjx_protamer.agents.ddpg.train import make_train, resolve_devices
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
@@ -152,11 +153,9 @@ def run_pretrain(
     kept = run.state[-1] if select else None
     log.close()
     if fb is not None:
-        from mjx_protamer.experiments.feedback_train import reward_model_bytes
-
         fb_log.note(event="end", chunk=chunk, totals=[float(x) for x in jax.device_get(fb_state.totals)])
         fb_log.close()
-        write_atomic(out / "reward_model.msgpack", reward_model_bytes(fb_state))
+        saved_reward_model.save(out, fb_state.rm_params, fb_state.rm_opt_state, int(fb_state.totals[4]))
 
     result = {
         "out_dir": str(out),
@@ -171,7 +170,7 @@ def run_pretrain(
         "state": state,
     }
     if fb is not None:
-        result.update(feedback_log=str(out / "feedback.jsonl"), reward_model=str(out / "reward_model.msgpack"),
+        result.update(feedback_log=str(out / "feedback.jsonl"), reward_model=str(out / saved_reward_model.DIR),
                       feedback_state=fb_state, feedback_kind=feedback.kind)
         if log.rows:
             last = log.rows[-1]

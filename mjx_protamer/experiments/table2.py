@@ -347,19 +347,12 @@ def _save_condition_models(out: Path, name: str, rm_params, states: dict, agents
     test episodes ran, for rendering, fine-tuning or diagnosis, e.g. scripts/freeze_anatomy.py) and its
     sampled test states."""
     import io
-    import shutil
 
     from mjx_protamer.atomic import write_atomic
     from mjx_protamer.experiments import checkpoints
 
     for path, tree in ((out / "reward_models" / name, rm_params), (out / "agents" / name, agents)):
-        if (path / "0").exists():  # from an attempt at this condition that did not finish (a kill, a full disk)
-            shutil.rmtree(path / "0")
-        mngr = checkpoints.manager(path, max_to_keep=1)
-        try:
-            checkpoints.save(mngr, 0, jax.device_get(tree))
-        finally:
-            mngr.close()
+        checkpoints.save_model(path, jax.device_get(tree))
     buf = io.BytesIO()
     np.savez_compressed(buf, **states)
     write_atomic(out / f"test_states_{name}.npz", buf.getvalue())

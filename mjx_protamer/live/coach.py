@@ -164,7 +164,7 @@ class CoachSessionLearner(ChunkLearner):
 
     def load_policy(self, path: Path) -> None:
         """Start from the policy an earlier COACH session saved (its --out), with a fresh optimiser."""
-        from mjx_protamer.errors import CheckpointError
+        from mjx_protamer.errors import CheckpointDamaged, CheckpointError
         from mjx_protamer.experiments import checkpoints
 
         like = jax.eval_shape(lambda: self.trees())[POLICY_DIR]
@@ -175,6 +175,8 @@ class CoachSessionLearner(ChunkLearner):
                 raise ConfigError(f"--coach-policy {path}: no saved COACH policy there (the --out of an earlier "
                                   "`protamer finetune --learner coach`)")
             tree = checkpoints.restore(mngr, steps[-1], like)
+        except CheckpointDamaged as e:
+            raise CheckpointDamaged(f"--coach-policy {path}: {e}") from None
         except CheckpointError as e:
             raise ConfigError(f"--coach-policy {path} is not a COACH policy of this shape ({self.coach.activation} "
                               f"layers {tuple(self.coach.hidden)}); was it saved by a session with another "

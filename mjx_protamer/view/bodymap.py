@@ -67,7 +67,7 @@ def write_body_map(frequency, path: str | Path, title: str = "", env_config=None
     path = Path(path)
     try:
         with replacing(path) as tmp:
-            fig.savefig(tmp, dpi=100)
+            fig.savefig(tmp, dpi=100, format="png")
     finally:
         plt.close(fig)
     return path
