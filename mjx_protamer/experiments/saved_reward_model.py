@@ -3,8 +3,7 @@ every saved model (experiments/checkpoints.py: leaves by name, SHA-256 verified,
 
 The tree is the model's parameters, its Adam state and how many minibatch updates it took. Runs written
 before this format kept the same tree in `reward_model.msgpack` (flax msgpack, no checksum); `load` still reads
-them. A raw file has no checksum, so a bit flipped inside an array there goes unseen; a truncated or garbled
-one, or one whose arrays do not fit the config, is refused.
+them (experiments/old_msgpack.py).
 """
 
 from __future__ import annotations
@@ -16,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from mjx_protamer.errors import CheckpointDamaged, CheckpointError
-from mjx_protamer.experiments import checkpoints
+from mjx_protamer.errors import CheckpointError
+from mjx_protamer.experiments import checkpoints, old_msgpack
 
 DIR = "reward_model"
 OLD_FILE = "reward_model.msgpack"  # before checksums
@@ -58,31 +57,8 @@ def load(run_dir: str | Path, like_tree) -> dict:
     if (run_dir / DIR).is_dir():
         return checkpoints.load_model(run_dir / DIR, like_tree)
     if (run_dir / OLD_FILE).is_file():
-        return _load_old(run_dir / OLD_FILE, like_tree)
+        return old_msgpack.load(run_dir / OLD_FILE, like_tree, "reward model",
+                                "use the feedback_config.yaml of the run that wrote it")
     raise CheckpointError(f"{run_dir} holds no reward model ({DIR}/ or {OLD_FILE}); give the --out of a "
                           "`protamer pretrain --feedback simulated:KIND` run")
 
-
-def _load_old(path: Path, like_tree) -> dict:
-    from flax import serialization
-
-    try:
-        state = serialization.msgpack_restore(path.read_bytes())
-        restored = serialization.from_state_dict(like_tree, state)
-    except Exception as e:  # msgpack and flax raise many types for a truncated or garbled file
-        why = str(e).strip().splitlines()[0][:160] if str(e).strip() else type(e).__name__
-        raise CheckpointDamaged(f"reward model {path} is damaged: it cannot be read ({why}); train again, or "
-                                "restore it from a backup") from None
-    leaves, treedef = jax.tree_util.tree_flatten(restored)
-    wants = jax.tree_util.tree_leaves(like_tree)
-    if len(leaves) != len(wants):
-        raise CheckpointError(f"reward model {path} does not fit this config: {len(leaves)} arrays there, "
-                              f"{len(wants)} here; use the feedback_config.yaml of the run that wrote it")
-    out = []
-    for name, leaf, want in zip(checkpoints.named_leaves(like_tree), leaves, wants):
-        leaf = np.asarray(leaf)
-        if leaf.shape != want.shape:
-            raise CheckpointError(f"reward model {path} does not fit this config: {name} is {leaf.shape} there "
-                                  f"but {want.shape} here; use the feedback_config.yaml of the run that wrote it")
-        out.append(jnp.asarray(leaf, want.dtype))
-    return jax.tree_util.tree_unflatten(treedef, out)
