@@ -5,7 +5,7 @@ Two kinds of calibration share one file format:
 - `features`: tau plus the user's own prosody model (`audio_frontend.prosody_model`), fitted from their
   neutral, positive and negative samples.
 
-The file is JSON, written atomically (temporary file in the same folder, fsync, os.replace), so a crash
+The file is JSON, written atomically (`mjx_protamer.atomic`: temporary file in the same folder, fsync, os.replace), so a crash
 never leaves a half-written calibration. Loading applies the same bounds as writing (`check_tau`).
 """
 
@@ -14,12 +14,12 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 import time
 from pathlib import Path
 from statistics import median
 
 from audio_frontend.errors import CalibrationError
+from mjx_protamer.atomic import write_atomic
 
 FORMAT_VERSION = 2
 # Valences lie in [-1, 1], so tau = median |valence| can never exceed 1.
@@ -81,22 +81,7 @@ def compute_tau(samples: list[tuple[str, float]], min_per_sign: int = 3, min_tau
 def write_json_atomic(path: str | Path, record: dict) -> Path:
     path = Path(os.path.expanduser(str(path)))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.fchmod(fd, 0o666 & ~umask)   # mkstemp makes 0600; a result file is as readable as any other
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(record, fh, indent=2, sort_keys=True, allow_nan=False)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return write_atomic(path, json.dumps(record, indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
 def write_calibration(path: str | Path, record: dict) -> Path:

@@ -19,6 +19,7 @@ import os
 import time
 from pathlib import Path
 
+from mjx_protamer.atomic import write_atomic
 from mjx_protamer.errors import OutputDirError
 
 MARK = ".protamer.json"
@@ -142,9 +143,7 @@ def claim(path: str | Path, kind: str, resume: bool = False, own: tuple[str, ...
             os.fsync(fh.fileno())
         probe.unlink()
         if kind_of(path) != kind:
-            tmp = path / f".{MARK}.tmp{os.getpid()}"
-            tmp.write_text(json.dumps({"kind": kind, "claimed": time.time()}), encoding="utf-8")
-            os.replace(tmp, path / MARK)
+            write_atomic(path / MARK, json.dumps({"kind": kind, "claimed": time.time()}))
             created += (MARK,)
     except OSError as e:
         os.close(fd)

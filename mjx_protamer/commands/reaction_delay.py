@@ -4,9 +4,10 @@ as the channel values credit should use. No JAX (human/reaction_delay.py holds t
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
+
+from mjx_protamer.atomic import replacing
 
 
 def register(subparsers) -> None:
@@ -161,7 +162,8 @@ def _plot(fit, touch: str, path: Path) -> None:
     ax.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}.png")
-    fig.savefig(tmp)
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        with replacing(path) as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)

@@ -30,7 +30,7 @@ def register(subparsers) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--feedback", default=None, metavar="simulated:KIND",
                    help="DeepTAMER with a simulated teacher per env, inside the jitted chunk: simulated:keyboard, "
-                   "simulated:prosody or simulated:speech (writes feedback.jsonl and reward_model.msgpack too)")
+                   "simulated:prosody or simulated:speech (writes feedback.jsonl and reward_model/ too)")
     p.add_argument("--feedback-config", type=Path, default=None,
                    help="configs/feedback_*.yaml: its `feedback` section (teacher rule, channel, credit, reward "
                    "model) and optional `batched` section; its `pretrain` section is used only without --config. "

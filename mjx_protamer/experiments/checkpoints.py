@@ -24,7 +24,6 @@ import errno
 import gc
 import hashlib
 import json
-import os
 import shutil
 import sys
 import time
@@ -35,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import orbax.checkpoint as ocp
 
+from mjx_protamer.atomic import write_atomic
 from mjx_protamer.errors import CheckpointDamaged, CheckpointError
 
 MANIFEST = "manifest.json"
@@ -98,21 +98,6 @@ def step_dir(mngr: ocp.CheckpointManager, step: int) -> Path:
     return Path(mngr.directory) / str(step)
 
 
-def write_atomic(path: Path, data: str | bytes) -> None:
-    """Write a file so that a kill at any moment leaves the old or the new content, never a torn one."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data.encode() if isinstance(data, str) else data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    fd = os.open(path.parent, os.O_RDONLY)  # the rename itself is durable once the directory is synced
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def _file_sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -157,6 +142,28 @@ def save(mngr: ocp.CheckpointManager, step: int, state) -> None:
     manifest = {"format": FORMAT, "step": int(step), "leaves": _describe(host), "sha256": _digest(host),
                 "files": _file_digests(step_dir(mngr, step))}
     write_atomic(step_dir(mngr, step) / MANIFEST, json.dumps(manifest, indent=1))
+
+
+def save_model(directory: str | Path, tree) -> None:
+    """Save a model that is written once, at the end of a run (a reward model, a condition's agents), as step 0
+    of `directory`, replacing what an unfinished earlier attempt left there (a kill, a full disk)."""
+    directory = Path(directory)
+    if (directory / "0").exists():
+        shutil.rmtree(directory / "0")
+    mngr = manager(directory, max_to_keep=1)
+    try:
+        save(mngr, 0, tree)
+    finally:
+        mngr.close()
+
+
+def load_model(directory: str | Path, like):
+    """The model `save_model` wrote into `directory`, checked as `restore` checks a step."""
+    mngr = manager(directory)
+    try:
+        return restore(mngr, 0, like)
+    finally:
+        mngr.close()
 
 
 def _read_manifest(directory: Path) -> dict:

@@ -254,7 +254,7 @@ def _write_merged(cfg, out: Path, parts: list, layout: dict, total_s: float) -> 
     import yaml
 
     from mjx_protamer.config import to_dict
-    from mjx_protamer.experiments.checkpoints import write_atomic
+    from mjx_protamer.atomic import write_atomic
     from mjx_protamer.experiments.table2 import write_table2
 
     merged = _merge(parts, cfg)
@@ -270,7 +270,7 @@ def _write_merged(cfg, out: Path, parts: list, layout: dict, total_s: float) -> 
 def _check_layout(path: Path, layout: dict, resume: bool) -> None:
     """processes.json says how the seeds were split; a resumed run must split them the same way (and a run of
     one process is continued by one process)."""
-    from mjx_protamer.experiments.checkpoints import write_atomic
+    from mjx_protamer.atomic import write_atomic
 
     if resume and not path.is_file() and any(path.parent.glob("condition_*.json")):
         raise ConfigError(f"--resume: {path.parent} is a run of one process; continue it with one process (without "

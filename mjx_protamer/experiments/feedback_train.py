@@ -371,15 +371,6 @@ def parse_feedback(spec: str) -> str:
     return spec.split(":", 1)[1]
 
 
-def reward_model_bytes(fs: FeedbackState) -> bytes:
-    from flax import serialization
-
-    return serialization.msgpack_serialize({
-        "params": serialization.to_state_dict(jax.device_get(fs.rm_params)),
-        "opt_state": serialization.to_state_dict(jax.device_get(fs.rm_opt_state)),
-        "updates": int(fs.totals[4])})
-
-
 def step_window_note(kind: str, credit, dt: float) -> str | None:
     if credit.scheme == "step_window" and credit.window_steps * dt < 0.2:
         return (f"note: step_window credit covers {credit.window_steps * dt * 1000:.0f} ms before the arrival "

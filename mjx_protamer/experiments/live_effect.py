@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mjx_protamer.atomic import write_atomic
+
 METRICS = ("teacher_score", "unique_regions", "freeze_ratio", "contact_rate")
 CHANNELS = ("keyboard", "prosody", "whisper")
 DONE = "DONE"  # written into a session's directory when its process exited 0
@@ -213,8 +215,8 @@ def run_live_effect(plan: Plan, log=print) -> dict:
         if voice:
             summary["paired"][arm]["speaker"] = _pool_speaker(voice)
     summary["drift"] = {m: seed_stats([r["none"][m] - r["start"][m] for r in rows]) for m in METRICS}
-    _write(plan.out / "live_effect.json", json.dumps(summary, indent=1))
-    (plan.out / "live_effect.md").write_text(markdown(summary))
+    write_atomic(plan.out / "live_effect.json", json.dumps(summary, indent=1))
+    write_atomic(plan.out / "live_effect.md", markdown(summary))
     figure(summary, plan.out / "live_effect.png")
     return summary
 
@@ -230,10 +232,6 @@ def _pool_speaker(summaries: list[dict]) -> dict:
             "held_back": sum(s["held_back"] for s in summaries), "stray_events": sum(s["stray_events"] for s in summaries)}
 
 
-def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 def _cell(st: dict, digits: int = 3) -> str:

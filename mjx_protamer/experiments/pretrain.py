@@ -20,8 +20,9 @@ import jax
 import jax.numpy as jnp
 import yaml
 
+from mjx_protamer.atomic import write_atomic
 from mjx_protamer.config import ConfigError, read_raw, to_dict
-from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner
+from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner, saved_reward_model
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate, validation_seed
 from mjx_protamer.experiments.run_loader import CONFIG_NAME, SELECTED_DIR
 
@@ -42,8 +43,9 @@ def run_pretrain(
     `max_chunks` stops after that many chunks of this call (as a kill would; used to test resume).
     `feedback`: None, or a `FeedbackSetup` (simulated teachers + DeepTAMER inside the jitted chunk, see
     `experiments.feedback_train`); then the CSV/TensorBoard rows gain feedback counts and r_hat stats, every
-    event goes to `feedback.jsonl` (append + fsync, `FeedbackLog`), the reward model to `reward_model.msgpack`
-    and the feedback carry to `checkpoints_feedback/` (so `resume` is exact with feedback too).
+    event goes to `feedback.jsonl` (append + fsync, `FeedbackLog`), the reward model to `reward_model/`
+    (`saved_reward_model`) and the feedback carry to `checkpoints_feedback/` (so `resume` is exact with feedback
+    too).
     """
     from mjx_protamer.agents.ddpg.train import make_train, resolve_devices
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
@@ -83,9 +85,9 @@ def run_pretrain(
     select = tc.select_every_chunks > 0
     ckpt = runner.Checkpointer([ckpt_dir] + ([out / "checkpoints_feedback"] if fb is not None else [])
                                + ([out / SELECTED_DIR] if select else []), tc.checkpoint_every_chunks)
-    checkpoints.write_atomic(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
+    write_atomic(config_path, yaml.safe_dump(saved, sort_keys=False).encode())
     if fb is not None:
-        checkpoints.write_atomic(out / "feedback_config.yaml", yaml.safe_dump(
+        write_atomic(out / "feedback_config.yaml", yaml.safe_dump(
             {"kind": feedback.kind, "feedback": to_dict(feedback.config), "batched": to_dict(feedback.batched)},
             sort_keys=False).encode())
     # The runner's state: one part per checkpoint directory.
@@ -151,11 +153,9 @@ def run_pretrain(
     kept = run.state[-1] if select else None
     log.close()
     if fb is not None:
-        from mjx_protamer.experiments.feedback_train import reward_model_bytes
-
         fb_log.note(event="end", chunk=chunk, totals=[float(x) for x in jax.device_get(fb_state.totals)])
         fb_log.close()
-        checkpoints.write_atomic(out / "reward_model.msgpack", reward_model_bytes(fb_state))
+        saved_reward_model.save(out, fb_state.rm_params, fb_state.rm_opt_state, int(fb_state.totals[4]))
 
     result = {
         "out_dir": str(out),
@@ -170,7 +170,7 @@ def run_pretrain(
         "state": state,
     }
     if fb is not None:
-        result.update(feedback_log=str(out / "feedback.jsonl"), reward_model=str(out / "reward_model.msgpack"),
+        result.update(feedback_log=str(out / "feedback.jsonl"), reward_model=str(out / saved_reward_model.DIR),
                       feedback_state=fb_state, feedback_kind=feedback.kind)
         if log.rows:
             last = log.rows[-1]
@@ -189,7 +189,7 @@ def run_pretrain(
             last = evaluate(config, env, state.actor_params, tc.eval_episodes, eval_seed(config))
             summary["selection"] = dict(result["selection"], last_actor={
                 k: last[k] for k in ("unique_regions", "freeze_ratio", "contact_rate", "episode_return")})
-        checkpoints.write_atomic(out / "eval.json", json.dumps(summary, indent=2).encode())
+        write_atomic(out / "eval.json", json.dumps(summary, indent=2).encode())
         result["eval"] = summary
         result["eval_json"] = str(out / "eval.json")
     ckpt.close()
@@ -271,7 +271,7 @@ def _with_selection(step, config, env, fb, fb_params, human_reward_fn, human_par
             kept = keep(kept, actor, score, chunk[0])
             candidates.append({"chunk": chunk[0], "score": float(score),
                                "freeze_ratio": float(jnp.mean(speed < config.env.freeze_speed))})
-            checkpoints.write_atomic(path, json.dumps({"candidates": candidates}, indent=2).encode())
+            write_atomic(path, json.dumps({"candidates": candidates}, indent=2).encode())
         return new + (kept,), metrics, extra
 
     return selecting_step, candidates
@@ -300,4 +300,4 @@ def _truncate_feedback_log(path: Path, last_step: int) -> None:
     from mjx_protamer.human.queue import FeedbackLog
 
     keep = [r for r in FeedbackLog.records(path) if r.get("step") is None or r["step"] < last_step]
-    checkpoints.write_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in keep).encode())
+    write_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in keep).encode())

@@ -24,8 +24,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from mjx_protamer.atomic import write_atomic
 from mjx_protamer.config import ConfigError, to_dict
-from mjx_protamer.experiments.checkpoints import write_atomic
 from mjx_protamer.experiments.env_factory import make_env
 from mjx_protamer.experiments.feedback_train import make_feedback_train
 from mjx_protamer.experiments.table2 import (load_condition_models, summarize, format_markdown, load_condition_agents,

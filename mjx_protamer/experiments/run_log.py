@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from mjx_protamer.atomic import replacing
 
 CSV_NAME = "metrics.csv"
 PLOT_NAME = "training_curve.png"
@@ -67,15 +68,11 @@ class RunLog:
 
     def _rewrite(self) -> None:
         """The CSV from `self.rows`, replaced atomically (a kill leaves the old file or the new one)."""
-        tmp = self.csv_path.with_name(self.csv_path.name + ".tmp")
-        with tmp.open("w", newline="") as f:
+        with replacing(self.csv_path) as tmp, tmp.open("w", newline="") as f:
             if self.rows:
                 w = csv.DictWriter(f, fieldnames=list(self.rows[0]))
                 w.writeheader()
                 w.writerows(self.rows)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, self.csv_path)
 
     def write(self, row: dict[str, float]) -> None:
         new_file = not self.rows

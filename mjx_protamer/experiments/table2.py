@@ -158,7 +158,7 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     """Train and test every condition on `cfg.seeds` (vmapped in one program), writing each condition's results
     and agents into `out_dir` as it finishes; the pooled reward-model score at the end. No table or figures:
     `write_table2` makes them."""
-    from mjx_protamer.experiments.checkpoints import write_atomic
+    from mjx_protamer.atomic import write_atomic
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
 
     cfg = dataclasses.replace(cfg, pretrain=with_resolved_backend(cfg.pretrain, announce=progress))
@@ -289,7 +289,7 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
 def write_table2(cfg: Table2Config, out_dir, trained: Trained, total_s: float, extra: dict | None = None) -> dict:
     """table2.json / table2.md (with `extra`'s keys added to the summary), the figures, training.csv and the body
     maps of a trained run into `out_dir`; the paths, the wall time and the summary."""
-    from mjx_protamer.experiments.checkpoints import write_atomic
+    from mjx_protamer.atomic import write_atomic
 
     out, pre = Path(out_dir), cfg.pretrain
     training, evals = trained.training, trained.evals
@@ -347,21 +347,15 @@ def _save_condition_models(out: Path, name: str, rm_params, states: dict, agents
     test episodes ran, for rendering, fine-tuning or diagnosis, e.g. scripts/freeze_anatomy.py) and its
     sampled test states."""
     import io
-    import shutil
 
+    from mjx_protamer.atomic import write_atomic
     from mjx_protamer.experiments import checkpoints
 
     for path, tree in ((out / "reward_models" / name, rm_params), (out / "agents" / name, agents)):
-        if (path / "0").exists():  # from an attempt at this condition that did not finish (a kill, a full disk)
-            shutil.rmtree(path / "0")
-        mngr = checkpoints.manager(path, max_to_keep=1)
-        try:
-            checkpoints.save(mngr, 0, jax.device_get(tree))
-        finally:
-            mngr.close()
+        checkpoints.save_model(path, jax.device_get(tree))
     buf = io.BytesIO()
     np.savez_compressed(buf, **states)
-    checkpoints.write_atomic(out / f"test_states_{name}.npz", buf.getvalue())
+    write_atomic(out / f"test_states_{name}.npz", buf.getvalue())
 
 
 def load_finished_condition(out: Path, name: str) -> tuple["Table2Config", dict]:

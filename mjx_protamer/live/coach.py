@@ -28,6 +28,7 @@ from mjx_protamer.human.events import FeedbackEvent
 from mjx_protamer.live.learner import Chunk, ChunkLearner
 
 POLICY_DIR = "coach_policy"  # the policy's parameters (orbax, checksummed) and its progress
+OLD_POLICY_FILE = "coach_policy.msgpack"  # the parameters alone, as sessions saved them before checksums
 # Deep COACH from a pretrained actor: the initial log std of its Gaussian policy (docs/human_feedback.md)
 ACTOR_LOG_STD = -1.0
 
@@ -163,27 +164,41 @@ class CoachSessionLearner(ChunkLearner):
         self.first_step = step
 
     def load_policy(self, path: Path) -> None:
-        """Start from the policy an earlier COACH session saved (its --out), with a fresh optimiser."""
-        from mjx_protamer.errors import CheckpointError
+        """Start from the policy an earlier COACH session saved (its --out, or the coach_policy.msgpack of a
+        session saved before checksums), with a fresh optimiser."""
+        from mjx_protamer.errors import CheckpointDamaged, CheckpointError
+        from mjx_protamer.experiments import old_msgpack
+
+        path = Path(path)
+        old = path if path.is_file() else path / OLD_POLICY_FILE
+        try:
+            if old.is_file() and not (path / POLICY_DIR).is_dir():
+                params = old_msgpack.load(old, self.learner.params, "COACH policy")
+            else:
+                params = self._saved_params(path)
+        except CheckpointDamaged as e:
+            raise CheckpointDamaged(f"--coach-policy {path}: {e}") from None
+        except CheckpointError as e:
+            raise ConfigError(f"--coach-policy {path} is not a COACH policy of this shape ({self.coach.activation} "
+                              f"layers {tuple(self.coach.hidden)}); was it saved by a session with another "
+                              f"--coach-init? ({e})") from None
+        self.learner.params = params
+        self.learner.opt_state = self.learner.optimizer.init(self.learner.params)
+        self.commit()
+
+    def _saved_params(self, path: Path):
         from mjx_protamer.experiments import checkpoints
 
         like = jax.eval_shape(lambda: self.trees())[POLICY_DIR]
-        mngr = checkpoints.manager(Path(path) / POLICY_DIR)
+        mngr = checkpoints.manager(path / POLICY_DIR)
         try:
             steps = checkpoints.available_steps(mngr.directory)
             if not steps:
                 raise ConfigError(f"--coach-policy {path}: no saved COACH policy there (the --out of an earlier "
                                   "`protamer finetune --learner coach`)")
-            tree = checkpoints.restore(mngr, steps[-1], like)
-        except CheckpointError as e:
-            raise ConfigError(f"--coach-policy {path} is not a COACH policy of this shape ({self.coach.activation} "
-                              f"layers {tuple(self.coach.hidden)}); was it saved by a session with another "
-                              f"--coach-init? ({e})") from None
+            return checkpoints.restore(mngr, steps[-1], like)["params"]
         finally:
             mngr.close()
-        self.learner.params = tree["params"]
-        self.learner.opt_state = self.learner.optimizer.init(self.learner.params)
-        self.commit()
 
     def _end_note(self) -> dict:
         return {"corrections": self.corrections}

@@ -27,6 +27,7 @@ import json
 import os
 from pathlib import Path
 
+from mjx_protamer.atomic import write_atomic
 from mjx_protamer.errors import SessionRecordError
 from mjx_protamer.human.events import FeedbackEvent
 
@@ -49,13 +50,7 @@ def tree_sha256(path: str | Path) -> str:
 
 
 def write_json_atomic(path: str | Path, data: dict) -> None:
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with tmp.open("w", encoding="utf-8") as fh:
-        json.dump(data, fh, indent=2, sort_keys=True)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    write_atomic(path, json.dumps(data, indent=2, sort_keys=True))
 
 
 def _digest(record: dict) -> str:

@@ -90,6 +90,7 @@ class Saver:
         import jax
         import yaml
 
+        from mjx_protamer.atomic import write_atomic
         from mjx_protamer.config import to_dict
         from mjx_protamer.experiments import checkpoints
         from mjx_protamer.errors import WriteFailed
@@ -103,10 +104,8 @@ class Saver:
                 finally:
                     mngr.close()
             if self.learner.kind == "ddpg":  # loadable by `protamer eval --checkpoint OUT` and finetune again
-                checkpoints.write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(self.learner.config),
-                                                                             sort_keys=False))
-            checkpoints.write_atomic(out / "feedback_config.yaml", yaml.safe_dump(to_dict(self.spec.config),
-                                                                                  sort_keys=False))
+                write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(self.learner.config), sort_keys=False))
+            write_atomic(out / "feedback_config.yaml", yaml.safe_dump(to_dict(self.spec.config), sort_keys=False))
             if self.recorder is not None:
                 self.recorder.saved(self.next, self.learner.first_step)
         except Exception as e:  # OSError (disk full, permissions), or orbax's own wrapping of one

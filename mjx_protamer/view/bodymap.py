@@ -8,11 +8,11 @@ OpenGL (gl.choose_backend) for the self-touch infant.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from mjx_protamer.atomic import replacing
 from mjx_protamer.envs import body
 
 UNTOUCHED = (0.78, 0.78, 0.80, 1.0)
@@ -65,14 +65,11 @@ def write_body_map(frequency, path: str | Path, title: str = "", env_config=None
         fig.suptitle(title)
     fig.tight_layout()
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}.png")
     try:
-        fig.savefig(tmp, dpi=100)
-        os.replace(tmp, path)
+        with replacing(path) as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
     finally:
         plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 

@@ -3,10 +3,11 @@ atomically: the file appears complete under its name or not at all."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from mjx_protamer.atomic import replacing
 
 FORMATS = (".mp4", ".gif", ".png")
 
@@ -26,18 +27,13 @@ def write_frames(path: str | Path, frames: list[np.ndarray], fps: float) -> Path
 
     path = check_path(path)
     suffix = path.suffix.lower()
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{suffix}")
-    try:
+    with replacing(path) as tmp:
         if suffix == ".png":
             iio.imwrite(tmp, frames[0])
         elif suffix == ".gif":
             iio.imwrite(tmp, np.stack(frames), duration=1000.0 / fps, loop=0)
         else:
             _write_mp4(tmp, frames, fps)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 

@@ -11,7 +11,6 @@ import json
 import numpy as np
 import pytest
 import yaml
-from flax import serialization
 
 from mjx_protamer.cli import main
 from mjx_protamer.human.queue import FeedbackLog
@@ -76,19 +75,20 @@ def test_feedback_is_given_credited_and_learned(keyboard_run):
     assert all(e.details["about_step"] < e.details["arrival_step"] for e in events)
     assert {e.value for e in events} <= {-1.0, 1.0}
     # the reward model moved away from its initialisation (same seed, DDPG alone leaves it there)
-    saved = serialization.msgpack_restore((out / "reward_model.msgpack").read_bytes())
-    assert saved["updates"] > 0
     import jax
     import jax.numpy as jnp
 
-    from mjx_protamer.human.reward_model import RewardMLP
+    from mjx_protamer.experiments import saved_reward_model
+    from mjx_protamer.human.reward_model import RewardMLP, RewardModelConfig
+    saved = saved_reward_model.load(out, saved_reward_model.like(RewardModelConfig(hidden=(16,)), 6, 2))
+    assert int(saved["updates"]) == int(float(last["rm_updates_total"])) > 0
     init = RewardMLP((16,)).init(jax.random.split(jax.random.fold_in(jax.random.PRNGKey(0), 0x7A3E))[0],
                                  jnp.zeros((1, 6)), jnp.zeros((1, 2)))
     k0 = saved["params"]["params"]["Dense_0"]["kernel"]
     assert not np.allclose(np.asarray(k0), np.asarray(init["params"]["Dense_0"]["kernel"]))
     # the model learned the teacher's direction: up is better than down
     from mjx_protamer.human.reward_model import reward_fn
-    p = serialization.from_state_dict(init, saved["params"])
+    p = saved["params"]
     obs = np.zeros((1, 6), np.float32)
     up, down = (float(reward_fn((16,))(p, obs, np.array([[0.0, s]], np.float32))[0]) for s in (1.0, -1.0))
     assert up > down

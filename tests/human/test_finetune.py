@@ -334,6 +334,32 @@ def test_finetune_coach_starts_from_the_checkpoints_actor(toy_run, tmp_path):
     np.testing.assert_allclose(np.asarray(log_std), -1.0)
     assert run_main("--learner", "coach", "--coach-init", "scratch", "--feedback", "none", "--checkpoint", toy_run,
                     "--out", tmp_path / "scratch", "--max-chunks", "1", "--coach-policy", out) == 2
+    # a damaged policy is refused as damaged (not as one of another shape), in one line that names it
+    from mjx_protamer.errors import CheckpointDamaged
+
+    step = max((out / "coach_policy").iterdir(), key=lambda p: int(p.name) if p.name.isdigit() else -1)
+    data = max((p for p in step.rglob("*") if p.is_file() and p.name != "manifest.json"), key=lambda p: p.stat().st_size)
+    raw = bytearray(data.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF
+    data.write_bytes(bytes(raw))
+    with pytest.raises(CheckpointDamaged, match=f"--coach-policy {out}: checkpoint {step} is damaged") as e:
+        learner.load_policy(out)
+    assert "\n" not in str(e.value) and "of this shape" not in str(e.value)
+    # a session saved before checksums left coach_policy.msgpack (flax bytes of the parameters): it still loads
+    import jax
+    from flax import serialization
+
+    saved = jax.device_get(learner.learner.params)
+    old = tmp_path / "old_session" / "coach_policy.msgpack"
+    old.parent.mkdir()
+    old.write_bytes(serialization.to_bytes(saved))
+    learner.learner.params = jax.tree.map(np.zeros_like, saved)
+    learner.load_policy(old.parent)
+    for a, b in zip(jax.tree.leaves(learner.learner.params), jax.tree.leaves(saved)):
+        assert np.array_equal(a, b)
+    old.write_bytes(old.read_bytes()[:100])
+    with pytest.raises(CheckpointDamaged, match=f"COACH policy {old} is damaged: it cannot be read"):
+        learner.load_policy(old)
 
 
 def test_finetune_takes_the_reward_weights_and_reward_model_from_the_session_config(toy_run, tmp_path, capsys):
