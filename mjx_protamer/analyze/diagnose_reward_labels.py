@@ -4,8 +4,8 @@ Two steps, both on the production code paths:
 
   collect: train one seed of a table2 condition (DTK by default) exactly as `protamer reproduce table2` does,
            and record every chunk's steps (obs, action) and the teacher's output (value, valid, score, about)
-           through debug callbacks on `feedback_train`'s `rule_signals` and `batched_teacher`; then the test
-           episodes' states with their hidden score (`table2.make_seed_evaluator`).
+           from the chunk's trace (`feedback_train.ChunkTrace`, read through the runner's progress callback);
+           then the test episodes' states with their hidden score (`table2.make_seed_evaluator`).
            protamer analyze diagnose-reward-labels collect --config configs/table2_habituation.yaml \
                --seed 0 --out runs/labels_seed0.npz
   fit:     fit fresh reward models offline on the recorded run's credited and silent rows
@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import time
 from pathlib import Path
 
 import jax
@@ -61,31 +60,16 @@ def collect(config: Path, condition: str, seed: int, out: Path) -> None:
     """Trains one seed of the config's `condition` and saves its steps, the teacher's output and the test states
     to `out` (.npz); a condition without feedback raises ConfigError."""
     from mjx_protamer.config import ConfigError
-    from mjx_protamer.experiments import feedback_train as FT
-    from mjx_protamer.experiments import table2 as T2
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
+    from mjx_protamer.experiments.feedback_train import make_feedback_train
+    from mjx_protamer.experiments.runner import run_chunks
+    from mjx_protamer.experiments.table2 import load_table2_config, make_seed_evaluator
 
-    cfg = T2.load_table2_config(config)
+    cfg = load_table2_config(config)
     cfg = dataclasses.replace(cfg, seeds=(seed,), pretrain=with_resolved_backend(cfg.pretrain, announce=True))
-    rec = {k: [] for k in ("obs", "action", "value", "valid", "score", "about")}
-    signals, teacher = FT.rule_signals, FT.batched_teacher
-
-    def recorded_signals(cols, obs, action, terms, region_mask=None, **kw):
-        jax.debug.callback(lambda o, a: (rec["obs"].append(np.asarray(o)), rec["action"].append(np.asarray(a))),
-                           obs, action)
-        return signals(cols, obs, action, terms, region_mask, **kw)
-
-    def recorded_teacher(*a, **kw):
-        state, out = teacher(*a, **kw)
-        keys = ("value", "valid", "score", "about")
-        jax.debug.callback(lambda *xs: [rec[k].append(np.asarray(x)) for k, x in zip(keys, xs)],
-                           *(out[k] for k in keys))
-        return state, out
-
-    FT.rule_signals, FT.batched_teacher = recorded_signals, recorded_teacher
     pre = cfg.pretrain
     env = make_env(pre)
-    ft = FT.make_feedback_train(pre, env, cfg.feedback, cfg.batched)
+    ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)
     matches = [c for c in cfg.conditions if c.name == condition]
     if not matches or matches[0].channel == "none":
         raise ConfigError(f"--condition {condition!r} must name a feedback condition of {config}")
@@ -95,18 +79,28 @@ def collect(config: Path, condition: str, seed: int, out: Path) -> None:
     ts = jax.jit(ft.trainer.init)(jax.random.PRNGKey(seed))
     fs = jax.jit(ft.init)(jnp.int32(seed))
     untrained = jax.tree.map(np.array, fs.rm_params)  # fs is donated to the chunk
-    t0 = time.perf_counter()
     n = pre.train.num_chunks
-    for c in range(n):
-        ts, fs, m, _ = ft.chunk(ts, fs, fp)
-        if c % 10 == 0 or c == n - 1:
-            print(f"chunk {c + 1}/{n} r_hat corr {float(m['r_hat_score_corr']):+.2f} "
-                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    jax.effects_barrier()
+    rec = {k: [] for k in ("obs", "action", "value", "valid", "score", "about")}
+
+    def step(state):
+        ts, fs, metrics, _, trace = ft.collect_chunk(*state, fp)
+        return (ts, fs), metrics, trace
+
+    def record(info) -> None:  # the chunk's trace: the steps the teacher judged and what it said
+        trace = info.extra
+        rec["obs"].append(trace.obs)
+        rec["action"].append(trace.action)
+        for k in ("value", "valid", "score", "about"):
+            rec[k].append(trace.teacher[k])
+        if info.chunk % 10 == 1 or info.chunk == n:
+            print(f"chunk {info.chunk}/{n} r_hat corr {float(info.metrics['r_hat_score_corr']):+.2f} "
+                  f"({info.wall_s:.0f} s)", flush=True)
+
+    ts, fs = run_chunks(step, (ts, fs), n, pre.train.chunk_steps * pre.train.num_envs, progress_fn=record).state
     one = lambda t: jax.tree.map(lambda x: x[None], t)
-    res, sample = T2.make_seed_evaluator(cfg, env, ft)(one(ts.actor_params), one(fs.rm_params), one(untrained))
+    res, sample = make_seed_evaluator(cfg, env, ft)(one(ts.actor_params), one(fs.rm_params), one(untrained))
     print(json.dumps({k: res[0][k] for k in ("unique_regions", "freeze_ratio", "teacher_score", "r_hat_corr_test")}))
-    np.savez_compressed(out, **{k: np.stack(v[:n]) for k, v in rec.items()},  # the test rollout's come after
+    np.savez_compressed(out, **{k: np.stack(v) for k, v in rec.items()},
                         **{"test_" + k: np.asarray(v[0]) for k, v in sample.items()},
                         lag_w=np.asarray(fp.lag_w), silence_w=float(fp.silence_w),
                         rows_per_event=cfg.batched.rows_per_event,
