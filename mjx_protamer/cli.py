@@ -22,6 +22,7 @@ COMMAND_MODULES = (
     "mjx_protamer.commands.feedback",
     "mjx_protamer.commands.reaction_delay",
     "mjx_protamer.commands.reproduce",
+    "mjx_protamer.commands.analyze",
     "mjx_protamer.commands.render",
     "mjx_protamer.commands.launch",
 )

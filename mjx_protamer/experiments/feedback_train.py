@@ -26,6 +26,12 @@
    `updates_per_feedback` minibatch steps on the chunk's new rows plus `chunk_steps // replay_every`
    replay minibatches (weighted squared loss, Adam, `batched.reward_model_updates`).
 
+`collect_chunk` is the same chunk with a `ChunkTrace` beside its outputs: the steps the teacher judged, the
+rule's signals, the teacher's output per step and the rows written to the feedback ring (the DDPG chunk's
+`collect_chunk` and its transitions, one level up). `chunk` is `collect_chunk` with the trace dropped: the
+trace holds values the chunk computes anyway, so `chunk` is the same program, and nobody pays for the trace
+unless they ask (a diagnostic reads it through the runner's progress callback, `runner.ChunkInfo.extra`).
+
 Devices: the feedback chunk runs on the DDPG trainer's mesh, inside one `shard_map` over the env axis
 ("data"). Per env (split over devices): the env batch, its teacher and pending ring, the credit history.
 Replicated: the reward model, its optimiser and feedback ring. Each device draws its own events' credited
@@ -138,6 +144,24 @@ class FeedbackState:
     history: CreditHistory
 
 
+class CreditedRows(NamedTuple):
+    """Rows of the feedback ring's shape: each event's credited steps, then the silent steps, gathered over the
+    devices in device order; `batched.ring_add` keeps those of weight > 0."""
+    obs: jax.Array  # (R, obs)
+    action: jax.Array  # (R, act)
+    weight: jax.Array  # (R,)
+    target: jax.Array  # (R,) the event's value; 0 for a silent step
+
+
+class ChunkTrace(NamedTuple):
+    """What a feedback chunk did (`FeedbackTrainer.collect_chunk`), per step and env in stepping order."""
+    obs: jax.Array  # (T, B, obs) the steps the teacher judged (the chunk's transitions)
+    action: jax.Array  # (T, B, act)
+    signals: jax.Array  # (T, B, C) the teacher rule's signals (`teachers.rule_signals`)
+    teacher: dict  # (T, B) each: value, valid (feedback arrived), about (the step judged), score, watching
+    credited: CreditedRows  # the rows the chunk handed to the feedback ring
+
+
 TOTAL_NAMES = ("feedback_total", "feedback_pos_total", "feedback_neg_total", "credited_rows_total", "rm_updates_total")
 
 
@@ -145,6 +169,7 @@ class FeedbackTrainer(NamedTuple):
     trainer: Any  # the DDPG Trainer (human_reward_fn = gated r_hat)
     init: Any  # (seed) -> FeedbackState
     chunk: Any  # jitted (train_state, feedback_state, FeedbackParams) -> (ts, fs, metrics, events)
+    collect_chunk: Any  # jitted: the same and its ChunkTrace, (ts, fs, metrics, events, trace)
     params: Any  # (kind | None, CreditConfig) -> FeedbackParams
     lag_len: int
     max_events: int
@@ -233,7 +258,7 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
     def gather(x, axis=0):  # the devices' pieces, concatenated in device (= global env) order
         return jax.lax.all_gather(x, AXIS, axis=axis, tiled=True) if sharded else x
 
-    def chunk(ts, fs: FeedbackState, fp: FeedbackParams):
+    def collect(ts, fs: FeedbackState, fp: FeedbackParams):
         it0 = ts.iteration
         hp = {"params": fs.rm_params, "gain": fp.gain}
         ts, metrics, steps, extras = trainer.chunk_body(ts, hp)
@@ -311,6 +336,11 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         history = CreditHistory(seen_obs[-H:], seen_act[-H:], seen_arrived[-H:], seen_watching[-H:])
         fs = fs.replace(teacher=teacher, rm_params=p, rm_opt_state=o, ring=ring, rng=rng, totals=totals,
                         history=history)
+        trace = ChunkTrace(obs, action, signals, out, CreditedRows(c_obs, c_act, w, h))
+        return ts, fs, metrics, events, trace
+
+    def chunk(ts, fs: FeedbackState, fp: FeedbackParams):
+        ts, fs, metrics, events, _ = collect(ts, fs, fp)
         return ts, fs, metrics, events
 
     if sharded:
@@ -320,12 +350,19 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
                                         pending_about=split, step=P()),
             rm_params=P(), rm_opt_state=P(), ring=P(), rng=P(), totals=P(),
             history=CreditHistory(P(None, AXIS), P(None, AXIS), P(None, AXIS), P(None, AXIS)))
-        chunk_fn = jax.shard_map(chunk, mesh=trainer.mesh, in_specs=(trainer.state_specs, fs_specs, P()),
+        per_env = P(None, AXIS)  # (T, B, ...)
+        trace_specs = ChunkTrace(per_env, per_env, per_env, per_env, P())
+        in_specs = (trainer.state_specs, fs_specs, P())
+        chunk_fn = jax.shard_map(chunk, mesh=trainer.mesh, in_specs=in_specs,
                                  out_specs=(trainer.state_specs, fs_specs, P(), split), check_vma=False)
+        collect_fn = jax.shard_map(collect, mesh=trainer.mesh, in_specs=in_specs,
+                                   out_specs=(trainer.state_specs, fs_specs, P(), split, trace_specs),
+                                   check_vma=False)
     else:
-        chunk_fn = chunk
+        chunk_fn, collect_fn = chunk, collect
     return FeedbackTrainer(trainer=trainer, init=init, chunk=jax.jit(chunk_fn, donate_argnums=(0, 1)),
-                           params=params_for, lag_len=L, max_events=E, apply=apply, chunk_fn=chunk_fn,
+                           collect_chunk=jax.jit(collect_fn, donate_argnums=(0, 1)), params=params_for,
+                           lag_len=L, max_events=E, apply=apply, chunk_fn=chunk_fn,
                            signals=lambda o, a, t, r: rule_signals(cols, o, a, t, r), history_len=H)
 
 

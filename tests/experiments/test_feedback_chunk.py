@@ -1,5 +1,6 @@
 """The in-jit feedback chunk's data path: DDPG alone is plain DDPG bit for bit, the credit history holds what
-the replay holds, and the chunk runs sharded over two devices like plain DDPG."""
+the replay holds, the trace shows what the chunk did without changing it, and the chunk runs sharded over two
+devices like plain DDPG."""
 
 from __future__ import annotations
 
@@ -80,6 +81,50 @@ def test_credit_history_is_what_the_replay_holds(setup):
     assert float(m["rm_updates_total"]) > 0 and float(m["feedback_dropped"]) == 0
 
 
+def test_the_trace_is_what_the_chunk_did_and_asking_for_it_changes_nothing(setup):
+    """`collect_chunk`'s trace: the credited rows of weight > 0 are the rows the feedback ring received, in order;
+    the teacher's output is nonzero exactly at the (step, env) of the chunk's events, with their values; the
+    steps it holds are those the credit history carries. Training with the trace (`collect_chunk`) and without
+    (`chunk`, which drops it) gives the same params, ring, metrics and events bit for bit."""
+    cfg, ft = setup
+    T, H = cfg.pretrain.train.chunk_steps, ft.history_len
+    credit = dataclasses.replace(cfg.feedback.credit, scheme="step_window", silence_weight=0.03)
+    fp = ft.params("keyboard", credit)  # a short window: steps with no feedback in theirs are silent rows
+    plain = (ft.trainer.init(jax.random.PRNGKey(5)), ft.init(5))
+    traced = (ft.trainer.init(jax.random.PRNGKey(5)), ft.init(5))
+    silent_rows = event_rows = 0
+    for _ in range(cfg.pretrain.train.num_chunks):
+        ring0 = jax.device_get(traced[1].ring)
+        it0 = int(traced[0].iteration)  # the chunk donates its inputs
+        *plain, m, ev = ft.chunk(*plain, fp)
+        *traced, mt, evt, trace = ft.collect_chunk(*traced, fp)
+        assert _equal((m, ev), (mt, evt))
+        trace, ring, evt = jax.device_get((trace, traced[1].ring, evt))
+        rows = trace.credited
+        kept = rows.weight > 0
+        cap = ring.obs.shape[0]
+        n = int(kept.sum())
+        assert n < cap and int(ring.ptr) == (int(ring0.ptr) + n) % cap
+        assert int(ring.size) == min(int(ring0.size) + n, cap)
+        at = (int(ring0.ptr) + np.arange(n)) % cap
+        for field in ("obs", "action", "weight", "target"):
+            np.testing.assert_array_equal(getattr(ring, field)[at], getattr(rows, field)[kept])
+        silent_rows += int(np.sum(kept & (rows.target == 0)))
+        event_rows += int(np.sum(kept & (rows.target != 0)))
+        teacher = trace.teacher
+        spoke = set(zip(*np.nonzero(teacher["value"])))
+        assert spoke == set(zip(*np.nonzero(teacher["valid"])))
+        present = evt["present"]
+        assert spoke == {(int(a) - it0, int(e)) for a, e in zip(evt["arrival"][present], evt["env"][present])}
+        np.testing.assert_array_equal(teacher["value"][evt["arrival"][present] - it0, evt["env"][present]],
+                                      evt["value"][present])
+        np.testing.assert_array_equal(np.asarray(traced[1].history.obs)[H - T:], trace.obs)
+        np.testing.assert_array_equal(np.asarray(traced[1].history.action)[H - T:], trace.action)
+        assert trace.signals.shape[:2] == trace.obs.shape[:2]
+    assert float(mt["feedback_total"]) > 20 and event_rows > 0 and silent_rows > 0
+    assert _equal(plain, traced)
+
+
 SCRIPT = textwrap.dedent(
     """
     import dataclasses, json, sys
@@ -104,13 +149,20 @@ SCRIPT = textwrap.dedent(
     vchunk = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)))
     for _ in range(cfg.pretrain.train.num_chunks):
         vts, vfs, vm, _ = vchunk(vts, vfs, fp)
+    # the trace of a sharded chunk: every env's steps, the credited rows of both devices once
+    ts, fs, _, ev, trace = ft.collect_chunk(ts, fs, fp)
+    trace, ev = jax.device_get((trace, ev))
     print(json.dumps({
+        "trace_obs": list(trace.obs.shape), "trace_spoke": int(trace.teacher["valid"].sum()),
+        "trace_events": int(ev["present"].sum()), "trace_rows": int(trace.credited.weight.shape[0]),
         "devices": ft.trainer.num_devices, "replicas": len(rm),
         "rm_replicas_equal": all(np.array_equal(rm[0], r) for r in rm),
         "actor_replicas_equal": all(np.array_equal(actor[0], r) for r in actor),
         "history_local": [list(s.shape) for s in shards(fs.history.obs)], "history_len": ft.history_len,
         "event_envs": sorted(envs), "feedback_total": float(m["feedback_total"]),
         "rm_updates_total": float(m["rm_updates_total"]), "credited": float(m["credited_rows_total"]),
+        "max_events": ft.max_events, "rows_per_event": cfg.batched.rows_per_event,
+        "silence_rows": cfg.batched.silence_rows_per_chunk,
         "corr": float(m["r_hat_score_corr"]),
         "vmapped_seed0": float(vm["feedback_total"][0]), "vmapped_seed1": float(vm["feedback_total"][1]),
     }))
@@ -135,6 +187,8 @@ def test_feedback_chunk_runs_on_two_devices():
     assert r["feedback_total"] > 20 and r["credited"] > r["feedback_total"] and r["rm_updates_total"] > 0
     assert np.isfinite(r["corr"])
     assert r["vmapped_seed0"] == r["feedback_total"] and r["vmapped_seed1"] > 0
+    assert r["trace_obs"] == [20, 4, 6] and r["trace_spoke"] == r["trace_events"]
+    assert r["trace_rows"] == 2 * (r["max_events"] * r["rows_per_event"] + r["silence_rows"])
 
 
 def test_teach_quiet_puts_the_teachers_on_the_envs_without_noise_only():

@@ -3,14 +3,12 @@
 in that chunk, and of `--episodes` test episodes of the deterministic actor at that point (docs/experiments.md,
 "The baseline's freeze is a snapshot").
 
-    python scripts/freeze_through_training.py --config configs/table2.yaml --seed 4 --set pretrain.env.habituation_s=0.25
+    protamer analyze freeze-through-training --config configs/table2.yaml --seed 4 --set pretrain.env.habituation_s=0.25
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 
 import jax
 import numpy as np
@@ -25,35 +23,28 @@ from mjx_protamer.experiments.table2 import load_table2_config
 ARM_VELOCITY_OBS = list(range(64, 68)) + list(range(70, 74))
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--config", default="configs/table2.yaml")
-    ap.add_argument("--set", action="append", default=[], help="config override, as for protamer reproduce")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--every", type=int, default=10, help="chunks between reports")
-    ap.add_argument("--episodes", type=int, default=4, help="test episodes per report")
-    args = ap.parse_args()
-
-    cfg = load_table2_config(args.config, args.set)
+def freeze_through_training(config, overrides: list[str], seed: int, every: int, episodes: int):
+    """Trains the config's DDPG on one seed and yields a line every `every` chunks (and after the last)."""
+    cfg = load_table2_config(config, overrides)
     pre = cfg.pretrain
     pre = with_resolved_backend(dataclasses.replace(
-        pre, train=dataclasses.replace(pre.train, seed=args.seed)), announce=False)
+        pre, train=dataclasses.replace(pre.train, seed=seed)), announce=False)
     env = make_env(pre)
     trainer = make_train(pre, env, devices=jax.devices()[:1])
     rollout = make_rollout(env, pre.train.episode_length, pre.ddpg.actor_hidden)
-    state = trainer.init(jax.random.PRNGKey(args.seed))
+    state = trainer.init(jax.random.PRNGKey(seed))
     num_envs = pre.train.num_envs
     first_quiet = num_envs - int(round(pre.ddpg.noise.quiet_fraction * num_envs))
     slow = pre.env.freeze_speed
     for chunk in range(pre.train.num_chunks):
         state, metrics, steps, _ = trainer.collect_chunk(state, None)
-        if (chunk + 1) % args.every and chunk + 1 < pre.train.num_chunks:
+        if (chunk + 1) % every and chunk + 1 < pre.train.num_chunks:
             continue
-        signals = rollout(state.actor_params, jax.random.split(jax.random.PRNGKey(10_000 + chunk), args.episodes))
+        signals = rollout(state.actor_params, jax.random.split(jax.random.PRNGKey(10_000 + chunk), episodes))
         test_slow = float(np.mean(np.asarray(signals["arm_speed"]) < slow))
         row = {"chunk": chunk + 1, "env_steps": int(metrics["env_steps"]), "test_slow": round(test_slow, 3)}
         row.update(_train_slow(steps, first_quiet, slow))
-        print(json.dumps(row), flush=True)
+        yield row
 
 
 def _train_slow(steps, first_quiet: int, slow: float) -> dict:
@@ -61,7 +52,3 @@ def _train_slow(steps, first_quiet: int, slow: float) -> dict:
     speed = np.linalg.norm(np.asarray(steps.obs)[..., ARM_VELOCITY_OBS], axis=-1)
     return {"quiet_slow": round(float(np.mean(speed[:, first_quiet:] < slow)), 3),
             "noisy_slow": round(float(np.mean(speed[:, :first_quiet] < slow)), 3)}
-
-
-if __name__ == "__main__":
-    main()

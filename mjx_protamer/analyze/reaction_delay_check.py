@@ -1,7 +1,7 @@
 """`protamer reaction-delay`'s fit against the truth, on recorded finetune sessions.
 
-    .venv/bin/python scripts/reaction_delay_check.py SESSION... [--touch head] [--out JSON]
-    .venv/bin/python scripts/reaction_delay_check.py SESSION... --person keyboard --seeds 10 [--out JSON]
+    protamer analyze reaction-delay-check SESSION... [--touch head] [--out JSON]
+    protamer analyze reaction-delay-check SESSION... --person keyboard --seeds 10 [--out JSON]
 
 - Without --person: the session's own feedback, from a simulated teacher; each simulated event names the step
   it judged (`details.about_step`), so its true delay is known. Per session: the fit (mean, std, CI, reacting
@@ -18,7 +18,6 @@ The report of docs/experiments.md, "Measuring a reaction delay from a session".
 
 from __future__ import annotations
 
-import argparse
 import bisect
 import json
 import sys
@@ -95,24 +94,15 @@ def simulated_person(session: Path, touch: str, min_gap_s: float, kind: str, see
     return out
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("sessions", nargs="+", type=Path)
-    p.add_argument("--touch", default="head")
-    p.add_argument("--min-gap-s", type=float, default=rd.MIN_GAP_S)
-    p.add_argument("--out", type=Path, default=None)
-    p.add_argument("--person", choices=("keyboard", "prosody", "speech"), default=None)
-    p.add_argument("--seeds", type=int, default=10)
-    p.add_argument("--person-gap-s", type=float, default=rd.MIN_GAP_S)
-    p.add_argument("--miss", type=float, default=0.15)
-    p.add_argument("--unrelated", type=float, default=0.1)
-    args = p.parse_args(argv)
+def report(sessions: list[Path], touch: str, min_gap_s: float, out: Path | None, person: str | None, seeds: int,
+           person_gap_s: float, miss: float, unrelated: float, command: str) -> int:
+    """Prints a line a session (or a simulated person) and writes them to `out` with the `command` that made
+    them; 0, or 2 with a one-line reason on stderr for a session that is not there."""
     rows = []
-    if args.person is not None:
-        for i, s in enumerate(args.sessions):
-            for seed in range(args.seeds):  # a new person in every session
-                r = simulated_person(s, args.touch, args.min_gap_s, args.person, 1000 * i + seed, args.person_gap_s,
-                                     args.miss, args.unrelated)
+    if person is not None:
+        for i, s in enumerate(sessions):
+            for seed in range(seeds):  # a new person in every session
+                r = simulated_person(s, touch, min_gap_s, person, 1000 * i + seed, person_gap_s, miss, unrelated)
                 rows.append(r)
                 f = r["fit"]
                 print(f"{s} person {seed}: drew {r['true_mean_s']:.3f} +- {r['true_std_s']:.3f} over "
@@ -120,15 +110,14 @@ def main(argv=None) -> int:
                                                            f"(std {f['std_s']:.3f})" if f else r["refused"]))
         summary = _summary(rows)
         print(json.dumps(summary))
-        if args.out is not None:
-            write_json_atomic(args.out, {"command": "scripts/reaction_delay_check.py " + " ".join(argv or sys.argv[1:]),
-                                         "summary": summary, "persons": rows})
+        if out is not None:
+            write_json_atomic(out, {"command": command, "summary": summary, "persons": rows})
         return 0
-    for s in args.sessions:
+    for s in sessions:
         try:
-            rows.append(check(s, args.touch, args.min_gap_s))
+            rows.append(check(s, touch, min_gap_s))
         except FileNotFoundError as e:
-            print(f"reaction_delay_check: {e}", file=sys.stderr)
+            print(f"protamer analyze reaction-delay-check: {e}", file=sys.stderr)
             return 2
         r = rows[-1]
         f = r["fit"]
@@ -136,9 +125,8 @@ def main(argv=None) -> int:
                   f"reacting)" if f else f"refused: {r['refused']}")
         print(f"{s}: {r['n_feedback']} feedback, {r['n_onsets']} onsets, true {r['true_mean_s']:.3f} +- "
               f"{r['true_std_s']:.3f} ({r['judged_at_an_onset']} judged at an onset); {fitted}")
-    if args.out is not None:
-        write_json_atomic(args.out, {"command": "scripts/reaction_delay_check.py " + " ".join(argv or sys.argv[1:]),
-                                     "sessions": rows})
+    if out is not None:
+        write_json_atomic(out, {"command": command, "sessions": rows})
     return 0
 
 
@@ -152,7 +140,3 @@ def _summary(rows: list[dict]) -> dict:
             "mean_error_s": {"mean": float(err.mean()), "max_abs": float(np.abs(err).max())} if len(err) else None,
             "std_error_s": {"mean": float(std_err.mean()), "max_abs": float(np.abs(std_err).max())}
             if len(err) else None}
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -4,16 +4,16 @@ Two steps, both on the production code paths:
 
   collect: train one seed of a table2 condition (DTK by default) exactly as `protamer reproduce table2` does,
            and record every chunk's steps (obs, action) and the teacher's output (value, valid, score, about)
-           through debug callbacks on `feedback_train`'s `rule_signals` and `batched_teacher`; then the test
-           episodes' states with their hidden score (`table2.make_seed_evaluator`).
-           .venv/bin/python scripts/diagnose_reward_labels.py collect --config configs/table2_habituation.yaml \
+           from the chunk's trace (`feedback_train.ChunkTrace`, read through the runner's progress callback);
+           then the test episodes' states with their hidden score (`table2.make_seed_evaluator`).
+           protamer analyze diagnose-reward-labels collect --config configs/table2_habituation.yaml \
                --seed 0 --out runs/labels_seed0.npz
   fit:     fit fresh reward models offline on the recorded run's credited and silent rows
            (`batched.draw_credited_steps`, the silent-step rule of `batched.draw_silent_steps`, and
            `batched.reward_model_updates`), with the teacher's labels or with labels an oracle corrected, and
            print r_hat's correlation with the hidden score on the test states and on the last 10 chunks'
            training states, one JSON line per variant.
-           .venv/bin/python scripts/diagnose_reward_labels.py fit runs/labels_seed{0,1,2,3,4}.npz
+           protamer analyze diagnose-reward-labels fit runs/labels_seed{0,1,2,3,4}.npz
 
 Variants (`--variants`, comma-separated NAME:SILENCE_WEIGHT[:balanced][:em]):
   teacher      the teacher's labels: each event's value on its credited steps, 0 on silent steps
@@ -30,11 +30,9 @@ Also printed: how many reproaches were flipped praise, and where the silent step
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
-import sys
-import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -42,66 +40,85 @@ import numpy as np
 import optax
 
 
-def collect(args) -> None:
-    from mjx_protamer.experiments import feedback_train as FT
-    from mjx_protamer.experiments import table2 as T2
+@dataclasses.dataclass(frozen=True)
+class FitOptions:
+    """How `fit` refits the reward models (the CLI's defaults are the docs' runs)."""
+
+    variants: str
+    updates: int
+    learning_rate: float
+    hidden: tuple[int, ...]
+    seed: int
+    em_rounds: int
+    em_temperature: float
+
+
+VARIANTS = ("teacher", "exact", "no_mistakes", "attentive")
+
+
+def collect(config: Path, condition: str, seed: int, out: Path) -> None:
+    """Trains one seed of the config's `condition` and saves its steps, the teacher's output and the test states
+    to `out` (.npz); a condition without feedback raises ConfigError."""
+    from mjx_protamer.config import ConfigError
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
+    from mjx_protamer.experiments.feedback_train import make_feedback_train
+    from mjx_protamer.experiments.runner import run_chunks
+    from mjx_protamer.experiments.table2 import load_table2_config, make_seed_evaluator
 
-    cfg = T2.load_table2_config(args.config)
-    cfg = dataclasses.replace(cfg, seeds=(args.seed,), pretrain=with_resolved_backend(cfg.pretrain, announce=True))
-    rec = {k: [] for k in ("obs", "action", "value", "valid", "score", "about")}
-    signals, teacher = FT.rule_signals, FT.batched_teacher
-
-    def recorded_signals(cols, obs, action, terms, region_mask=None, **kw):
-        jax.debug.callback(lambda o, a: (rec["obs"].append(np.asarray(o)), rec["action"].append(np.asarray(a))),
-                           obs, action)
-        return signals(cols, obs, action, terms, region_mask, **kw)
-
-    def recorded_teacher(*a, **kw):
-        state, out = teacher(*a, **kw)
-        keys = ("value", "valid", "score", "about")
-        jax.debug.callback(lambda *xs: [rec[k].append(np.asarray(x)) for k, x in zip(keys, xs)],
-                           *(out[k] for k in keys))
-        return state, out
-
-    FT.rule_signals, FT.batched_teacher = recorded_signals, recorded_teacher
+    cfg = load_table2_config(config)
+    cfg = dataclasses.replace(cfg, seeds=(seed,), pretrain=with_resolved_backend(cfg.pretrain, announce=True))
     pre = cfg.pretrain
     env = make_env(pre)
-    ft = FT.make_feedback_train(pre, env, cfg.feedback, cfg.batched)
-    matches = [c for c in cfg.conditions if c.name == args.condition]
+    ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)
+    matches = [c for c in cfg.conditions if c.name == condition]
     if not matches or matches[0].channel == "none":
-        sys.exit(f"error: --condition {args.condition!r} must name a feedback condition of {args.config}")
+        raise ConfigError(f"--condition {condition!r} must name a feedback condition of {config}")
     cond = matches[0]
     fp = ft.params(cond.channel, dataclasses.replace(cfg.feedback.credit, scheme=cond.credit))
     fp = fp._replace(gain=fp.gain * cond.beta_scale)
-    ts = jax.jit(ft.trainer.init)(jax.random.PRNGKey(args.seed))
-    fs = jax.jit(ft.init)(jnp.int32(args.seed))
+    ts = jax.jit(ft.trainer.init)(jax.random.PRNGKey(seed))
+    fs = jax.jit(ft.init)(jnp.int32(seed))
     untrained = jax.tree.map(np.array, fs.rm_params)  # fs is donated to the chunk
-    t0 = time.perf_counter()
     n = pre.train.num_chunks
-    for c in range(n):
-        ts, fs, m, _ = ft.chunk(ts, fs, fp)
-        if c % 10 == 0 or c == n - 1:
-            print(f"chunk {c + 1}/{n} r_hat corr {float(m['r_hat_score_corr']):+.2f} "
-                  f"({time.perf_counter() - t0:.0f} s)", flush=True)
-    jax.effects_barrier()
+    rec = {k: [] for k in ("obs", "action", "value", "valid", "score", "about")}
+
+    def step(state):
+        ts, fs, metrics, _, trace = ft.collect_chunk(*state, fp)
+        return (ts, fs), metrics, trace
+
+    def record(info) -> None:  # the chunk's trace: the steps the teacher judged and what it said
+        trace = info.extra
+        rec["obs"].append(trace.obs)
+        rec["action"].append(trace.action)
+        for k in ("value", "valid", "score", "about"):
+            rec[k].append(trace.teacher[k])
+        if info.chunk % 10 == 1 or info.chunk == n:
+            print(f"chunk {info.chunk}/{n} r_hat corr {float(info.metrics['r_hat_score_corr']):+.2f} "
+                  f"({info.wall_s:.0f} s)", flush=True)
+
+    ts, fs = run_chunks(step, (ts, fs), n, pre.train.chunk_steps * pre.train.num_envs, progress_fn=record).state
     one = lambda t: jax.tree.map(lambda x: x[None], t)
-    res, sample = T2.make_seed_evaluator(cfg, env, ft)(one(ts.actor_params), one(fs.rm_params), one(untrained))
+    res, sample = make_seed_evaluator(cfg, env, ft)(one(ts.actor_params), one(fs.rm_params), one(untrained))
     print(json.dumps({k: res[0][k] for k in ("unique_regions", "freeze_ratio", "teacher_score", "r_hat_corr_test")}))
-    np.savez_compressed(args.out, **{k: np.stack(v[:n]) for k, v in rec.items()},  # the test rollout's come after
+    np.savez_compressed(out, **{k: np.stack(v) for k, v in rec.items()},
                         **{"test_" + k: np.asarray(v[0]) for k, v in sample.items()},
                         lag_w=np.asarray(fp.lag_w), silence_w=float(fp.silence_w),
                         rows_per_event=cfg.batched.rows_per_event,
                         silence_rows_per_chunk=cfg.batched.silence_rows_per_chunk,
                         chunk_steps=pre.train.chunk_steps)
-    print(f"saved {args.out}")
+    print(f"saved {out}")
 
 
-def fit(args) -> None:
-    """Every recorded run (one per seed), then each variant's mean over them, 95% CI and per-seed values."""
+def fit(data: list[Path], opts: FitOptions) -> None:
+    """Every recorded run (one per seed), then each variant's mean over them, 95% CI and per-seed values; a
+    variant of another name raises ConfigError."""
+    from mjx_protamer.config import ConfigError
     from mjx_protamer.experiments.table2 import seed_stats
 
-    per_run = [fit_one(args, path) for path in args.data]
+    for spec in opts.variants.split(","):
+        if spec.split(":")[0] not in VARIANTS:
+            raise ConfigError(f"variant {spec.split(':')[0]!r}: use {', '.join(VARIANTS)}")
+    per_run = [fit_one(opts, path) for path in data]
     for name in per_run[0]:
         for metric in ("r_hat_corr_test", "r_hat_corr_late_training"):
             stats = seed_stats([run[name][metric] for run in per_run])
@@ -110,7 +127,7 @@ def fit(args) -> None:
                               "per_seed": [round(v, 3) for v in stats["seed_values"]]}), flush=True)
 
 
-def fit_one(args, path) -> dict:
+def fit_one(opts, path) -> dict:
     from mjx_protamer.human.batched import draw_credited_steps
     from mjx_protamer.human.reward_model import RewardMLP, reward_fn
 
@@ -127,7 +144,7 @@ def fit_one(args, path) -> dict:
     # the credited rows of every event, as in the chunk (K lags drawn by credit weight)
     E = int(valid.sum())
     rel, b_idx, ok, target, _ = map(np.asarray, draw_credited_steps(
-        jnp.asarray(value), jnp.asarray(valid), jnp.asarray(lag_w), jax.random.PRNGKey(args.seed), E, K))
+        jnp.asarray(value), jnp.asarray(valid), jnp.asarray(lag_w), jax.random.PRNGKey(opts.seed), E, K))
     ok = ok & (rel >= 0)
     rel = np.clip(rel, 0, None)
     ev_t, ev_b = np.nonzero(valid)  # the order draw_credited_steps takes events in
@@ -141,7 +158,7 @@ def fit_one(args, path) -> dict:
     silent = (arrivals[p + last + 1] - arrivals[p + first]) == 0
     n_silent = int(silent.sum())
     S = int(d["silence_rows_per_chunk"]) * (TT // int(d["chunk_steps"]))
-    pick = np.random.default_rng(args.seed).choice(np.flatnonzero(silent.ravel()), S)
+    pick = np.random.default_rng(opts.seed).choice(np.flatnonzero(silent.ravel()), S)
     s_t, s_b = p[pick // B], pick % B
 
     # where the silent steps with score +1 lie: the length of the +1 stretch around them
@@ -165,7 +182,7 @@ def fit_one(args, path) -> dict:
         "silent_plus1_steps_in_stretches_under_20_steps": float((run_of_silent < 20).mean()),
     }), flush=True)
 
-    hidden = tuple(args.hidden)
+    hidden = tuple(opts.hidden)
     apply = reward_fn(hidden, True)
     net = RewardMLP(hidden, True)
     test = (d["test_obs"], d["test_action"], d["test_score"])
@@ -184,10 +201,8 @@ def fit_one(args, path) -> dict:
         return {str(v): round(float(r[data[2] == v].mean()), 3) for v in (-1, 0, 1) if np.any(data[2] == v)}
 
     results = {}
-    for spec in args.variants.split(","):
+    for spec in opts.variants.split(","):
         name, w_silence, *rest = spec.split(":")
-        if name not in ("teacher", "exact", "no_mistakes", "attentive"):
-            sys.exit(f"error: variant {name!r}: use teacher, exact, no_mistakes or attentive")
         w_ev = (ok & ~mistake[:, None]) if name == "no_mistakes" else ok
         w_si = np.full(len(s_t), float(w_silence) * K * n_silent / S, np.float32)
         if name == "attentive":
@@ -196,12 +211,12 @@ def fit_one(args, path) -> dict:
         h_si = si_score if name == "exact" else np.zeros(len(s_t))
         balance = 10.0 if "balanced" in rest else None
         w_ev = w_ev.astype(np.float32)
-        for em_round in range(1 + (args.em_rounds if "em" in rest else 0)):
+        for em_round in range(1 + (opts.em_rounds if "em" in rest else 0)):
             if em_round:
-                agree = args.em_temperature * target * np.asarray(jax.jit(apply)(params, ev_obs, ev_act)).reshape(E, K)
+                agree = opts.em_temperature * target * np.asarray(jax.jit(apply)(params, ev_obs, ev_act)).reshape(E, K)
                 post = np.exp(agree - agree.max(1, keepdims=True)) * w_ev
                 w_ev = post / np.maximum(post.sum(1, keepdims=True), 1e-12) * w_ev.sum(1, keepdims=True)
-            params = fit_rows(args, net, apply, O, A, balance, (ev_obs, si_obs), (ev_act, si_act),
+            params = fit_rows(opts, net, apply, O, A, balance, (ev_obs, si_obs), (ev_act, si_act),
                               (w_ev.reshape(-1), w_si), (h_ev, h_si))
         results[spec] = {"r_hat_corr_test": corr(params, test), "r_hat_corr_late_training": corr(params, late)}
         print(json.dumps({"variant": spec, **{k: round(v, 3) for k, v in results[spec].items()},
@@ -209,7 +224,7 @@ def fit_one(args, path) -> dict:
     return results
 
 
-def fit_rows(args, net, apply, O, A, balance, *columns):
+def fit_rows(opts: FitOptions, net, apply, O, A, balance, *columns):
     """A fresh bounded model fitted on the rows (obs, action, weight, target), each given as parts to join."""
     from mjx_protamer.human.batched import FeedbackRing, reward_model_updates
 
@@ -217,37 +232,11 @@ def fit_rows(args, net, apply, O, A, balance, *columns):
     keep = rows[2] > 0
     o, a, w, h = (jnp.asarray(r[keep]) for r in rows)
     ring = FeedbackRing(o, a, w, h, jnp.int32(0), jnp.int32(len(w)))
-    params = net.init(jax.random.PRNGKey(args.seed), jnp.zeros((1, O)), jnp.zeros((1, A)))
-    opt = optax.adam(args.learning_rate)
+    params = net.init(jax.random.PRNGKey(opts.seed), jnp.zeros((1, O)), jnp.zeros((1, A)))
+    opt = optax.adam(opts.learning_rate)
     opt_state = opt.init(params)
     block = jax.jit(lambda pr, st, k: reward_model_updates(
         apply, opt, pr, st, ring, (o[:1], a[:1], w[:1], h[:1]), k, 0, 1000, 64, 1, balance)[:2])
-    for i in range(args.updates // 1000):
+    for i in range(opts.updates // 1000):
         params, opt_state = block(params, opt_state, jax.random.PRNGKey(1000 + i))
     return params
-
-
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="cmd", required=True)
-    c = sub.add_parser("collect")
-    c.add_argument("--config", default="configs/table2_habituation.yaml")
-    c.add_argument("--condition", default="DTK")
-    c.add_argument("--seed", type=int, default=0)
-    c.add_argument("--out", required=True)
-    f = sub.add_parser("fit")
-    f.add_argument("data", nargs="+", help="the .npz of `collect`, one per seed")
-    f.add_argument("--variants", default="teacher:0.03:balanced,teacher:0.03,teacher:1,exact:1,no_mistakes:1,"
-                                         "attentive:1,attentive:0.03:balanced")
-    f.add_argument("--updates", type=int, default=10_000)
-    f.add_argument("--learning-rate", type=float, default=1e-3)
-    f.add_argument("--hidden", type=int, nargs="+", default=[256, 256])
-    f.add_argument("--seed", type=int, default=0)
-    f.add_argument("--em-rounds", type=int, default=2, help="variants ending :em: reweight-and-refit rounds")
-    f.add_argument("--em-temperature", type=float, default=3.0)
-    args = parser.parse_args()
-    collect(args) if args.cmd == "collect" else fit(args)
-
-
-if __name__ == "__main__":
-    main()

@@ -14,12 +14,11 @@ the action (e.g. the lateral rule's touch norms), `by_clauses_held` splits the s
 hold ("c0+c1": both hands touching, score 0 under the lateral rule; "none": no clause), with r_hat's mean there:
 which states of one score the model over-rates.
 
-    .venv/bin/python scripts/r_hat_on_test_states.py runs/table2 [--condition DTK]
+    protamer analyze r-hat-on-test-states runs/table2 [--condition DTK]
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import jax
@@ -65,17 +64,19 @@ def clause_cells(rule, obs, action) -> np.ndarray | None:
     return names.reshape(held.shape[:-1])
 
 
-def main(argv=None) -> int:
-    from mjx_protamer.experiments.table2 import STATE_STRIDE, finished_condition_cli, load_condition_reward_models
+def r_hat_on_test_states(run: Path, condition: str) -> list[dict]:
+    """One line a seed of the condition's test states; a run or condition that is not there raises ConfigError."""
+    from mjx_protamer.experiments.table2 import STATE_STRIDE, load_condition_reward_models, load_finished_condition
 
-    args, cfg, states = finished_condition_cli(__doc__.splitlines()[0], argv)
+    cfg, states = load_finished_condition(run, condition)
     obs, action, score = states["obs"], states["action"], states["score"]
-    nets, params = load_condition_reward_models(args.run, cfg, args.condition, obs.shape[-1], action.shape[-1])
+    nets, params = load_condition_reward_models(run, cfg, condition, obs.shape[-1], action.shape[-1])
     r_hat = np.asarray(jax.jit(jax.vmap(nets.apply))(params, obs, action))
     per_episode = cfg.pretrain.train.episode_length // STATE_STRIDE  # the samples are whole episodes in order
     notice = max(c.sustain for c in cfg.feedback.teacher.rule)
     min_samples = max(1, -(-notice // STATE_STRIDE))
     cells = clause_cells(cfg.feedback.teacher.rule, obs, action)
+    lines = []
     for i, seed in enumerate(cfg.seeds):
         r, s = r_hat[i], score[i]
         classes = {}
@@ -102,14 +103,9 @@ def main(argv=None) -> int:
                      "r_hat_std": round(float(r[cells[i] == c].std()), 3)}
             for c in np.unique(cells[i])}
         rnd = lambda x: None if x is None else round(x, 3)
-        print(json.dumps({"seed": seed, "states": int(len(s)), "score_std": round(float(s.std()), 3),
-                          "r_hat_corr_test": rnd(corr(r, s)),
-                          "corr_without_spread_within_score": rnd(corr(class_mean, s)),
-                          "corr_with_perceivable_score": rnd(corr(r, seen)),
-                          "noticing_steps": notice, "by_score": classes,
-                          "by_clauses_held": by_cell}))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+        lines.append({"seed": seed, "states": int(len(s)), "score_std": round(float(s.std()), 3),
+                      "r_hat_corr_test": rnd(corr(r, s)),
+                      "corr_without_spread_within_score": rnd(corr(class_mean, s)),
+                      "corr_with_perceivable_score": rnd(corr(r, seen)),
+                      "noticing_steps": notice, "by_score": classes, "by_clauses_held": by_cell})
+    return lines

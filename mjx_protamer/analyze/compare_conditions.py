@@ -8,15 +8,13 @@ half-width and the per-seed values (`table2.seed_stats`), and with `--reference 
 difference to it, unpaired and paired over the seeds both ran (`table2.contrast`). `--plot PNG` draws each
 metric's per-seed values, the mean and its 95% interval, one panel a metric.
 
-    .venv/bin/python scripts/compare_conditions.py RUN[@TAG]... [--names DTK,DTW,...] [--reference DTK]
+    protamer analyze compare-conditions RUN[@TAG]... [--names DTK,DTW,...] [--reference DTK]
         [--metric teacher_score --metric r_hat_corr_test] [--plot compare.png]
 """
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -98,31 +96,12 @@ def plot(result: dict, metrics, path: Path) -> Path:
     return path
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("runs", nargs="+", help="--out directories of finished table2 runs (or rescores); DIR@TAG "
-                    "names that run's conditions NAME@TAG")
-    ap.add_argument("--names", default=None, help="conditions to show, comma-separated, in this order (default: all)")
-    ap.add_argument("--reference", default=None, help="the condition the others are paired against")
-    ap.add_argument("--metric", action="append", default=None, help=f"repeatable (default: {', '.join(DEFAULT_METRICS)})")
-    ap.add_argument("--plot", type=Path, default=None, help="write a PNG of the per-seed values")
-    args = ap.parse_args(argv)
-    metrics = tuple(args.metric or DEFAULT_METRICS)
-    try:
-        pooled = pool(args.runs, metrics)
-        names = args.names.split(",") if args.names else list(pooled)
-        for n in names + ([args.reference] if args.reference else []):
-            if n not in pooled:
-                raise ValueError(f"no run has a condition named {n!r}; they have: {', '.join(pooled)}")
-    except ValueError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    result = compare(pooled, names, metrics, args.reference)
-    if args.plot:
-        result["plot"] = str(plot(result, metrics, args.plot))
-    print(json.dumps(result, indent=1))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def compare_runs(runs: list[str], names: list[str] | None, metrics, reference: str | None) -> dict:
+    """`compare` of the pooled runs' conditions `names` (None: all, in the runs' order); a condition no run has
+    raises ValueError, as `pool` does for a seed given twice."""
+    pooled = pool(runs, metrics)
+    names = list(names) if names else list(pooled)
+    for n in names + ([reference] if reference else []):
+        if n not in pooled:
+            raise ValueError(f"no run has a condition named {n!r}; they have: {', '.join(pooled)}")
+    return compare(pooled, names, metrics, reference)

@@ -21,12 +21,11 @@ Also `still_fraction` (the freeze ratio of these samples), `median_still_run_s`,
 steps that lie in stops of at least 0.1 s (what a teacher who notices after 0.1 s can see) and 0.5 s (a held
 pose), against stop-and-go.
 
-    .venv/bin/python scripts/freeze_anatomy.py runs/table2 [--condition DTK]
+    protamer analyze freeze-anatomy runs/table2 [--condition DTK]
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -120,36 +119,36 @@ def part(mask, action, obs, lay, tmax, r_hat, critic=None):
     return {k: round(v, 3) for k, v in out.items()}
 
 
-def main(argv=None) -> int:
-    from mjx_protamer.experiments.table2 import STATE_STRIDE, finished_condition_cli
+def anatomy(run: Path, condition: str) -> list[dict]:
+    """One line a seed of the condition's test states; a run or condition that is not there, or states that do
+    not fit the run's env, raise ConfigError."""
+    from mjx_protamer.config import ConfigError
+    from mjx_protamer.experiments.table2 import STATE_STRIDE, load_finished_condition
 
-    args, cfg, states = finished_condition_cli(__doc__.splitlines()[0], argv)
+    cfg, states = load_finished_condition(run, condition)
     env = cfg.pretrain.env
     obs, action = states["obs"], states["action"]
     lay, tmax = obs_layout(env), max_torques(env)
     if obs.shape[-1] != env.observation_size:
-        raise SystemExit(f"error: {args.run} holds {obs.shape[-1]}-dim states but its config.yaml's env observes "
-                         f"{env.observation_size}: the run's files do not belong together")
-    r_hat = r_hat_of(args.run, args.condition, cfg, obs, action)
-    critic = critic_view(args.run, args.condition, cfg, obs, action)
+        raise ConfigError(f"{run} holds {obs.shape[-1]}-dim states but its config.yaml's env observes "
+                          f"{env.observation_size}: the run's files do not belong together")
+    r_hat = r_hat_of(run, condition, cfg, obs, action)
+    critic = critic_view(run, condition, cfg, obs, action)
     per_episode = cfg.pretrain.train.episode_length // STATE_STRIDE
     sample_s = STATE_STRIDE * cfg.pretrain.env.physics.timestep
+    lines = []
     for i, seed in enumerate(cfg.seeds):
         speed = np.linalg.norm(obs[i][:, lay["speed"]], axis=1)
         still = speed < env.freeze_speed
         runs = np.concatenate([runs_of(ep) for ep in still.reshape(-1, per_episode)])
         rh = None if r_hat is None else r_hat[i]
         cv = None if critic is None else tuple(c[i] for c in critic)
-        print(json.dumps({
+        lines.append({
             "seed": seed, "still_fraction": round(float(still.mean()), 3),
             "median_still_run_s": round(float(np.median(runs)) * sample_s, 3) if len(runs) else None,
             # the freeze's steps by the length of the stop they lie in: a held pose, or stop-and-go
-            **{f"still_in_stops_of_{t}s_or_more": round(float(runs[runs * sample_s >= t - 1e-9].sum() / max(runs.sum(), 1)), 3)
-               for t in STOP_S},
+            **{f"still_in_stops_of_{t}s_or_more":
+               round(float(runs[runs * sample_s >= t - 1e-9].sum() / max(runs.sum(), 1)), 3) for t in STOP_S},
             "still": part(still, action[i], obs[i], lay, tmax, rh, cv),
-            "moving": part(~still, action[i], obs[i], lay, tmax, rh, cv)}))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+            "moving": part(~still, action[i], obs[i], lay, tmax, rh, cv)})
+    return lines
