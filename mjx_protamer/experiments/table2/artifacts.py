@@ -1,5 +1,6 @@
 """A trained table2 run's files: table2.json and table2.md, Figure 1 (training curves), Figure 2 (unique regions
-per test episode), training.csv and one body map per condition."""
+per test episode), training.csv and one body map per condition (drawn by `view.bodymap`: this module is the
+only one of `experiments` that imports `view`)."""
 
 from __future__ import annotations
 
@@ -31,7 +32,6 @@ def write_table2(cfg: Table2Config, out_dir, trained: Trained, total_s: float, e
     write_atomic(out / "table2.md", format_markdown(summary))
     fig1 = plot_training(training, cfg, out / "figure1_training_reward.png")
     fig2 = plot_regions(summary, out / "figure2_unique_regions.png")
-    from mjx_protamer.view.bodymap import write_condition_body_maps  # body_map_<condition>.png
     write_condition_body_maps(pre, evals, out)
     return {"out_dir": str(out), "table_md": str(out / "table2.md"), "table_json": str(out / "table2.json"),
             "figure1": str(fig1), "figure2": str(fig2), "training_csv": str(out / "training.csv"),
@@ -126,3 +126,26 @@ def plot_regions(summary: dict, path: Path) -> Path:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def write_condition_body_maps(run_config, evals: dict, out_dir: str | Path) -> list[Path]:
+    """One body map per condition (region frequencies averaged over its seeds), as body_map_<condition>.png in
+    out_dir. Nothing for the toy env; a machine without offscreen OpenGL gets a note instead of the pictures.
+
+    The one import of `view` below it: a body map renders the infant (OpenGL), which is the view's."""
+    import sys
+
+    from mjx_protamer.view.bodymap import write_body_map
+    from mjx_protamer.view.gl import GLUnavailable
+
+    if run_config.env_name == "toy":
+        return []
+    paths = []
+    try:
+        for name, per_seed in evals.items():
+            freq = np.mean([ev["region_touch_frequency"] for ev in per_seed.values()], axis=0)
+            paths.append(write_body_map(freq, Path(out_dir) / f"body_map_{name}.png",
+                                        f"{name}: where the hands touch ({len(per_seed)} seed(s))", run_config.env))
+    except GLUnavailable as e:
+        print(f"note: no body maps: {e}", file=sys.stderr)
+    return paths

@@ -30,6 +30,7 @@ from mjx_protamer.experiments.evaluate import validation_seed
 from mjx_protamer.experiments.feedback_train import human_reward, make_feedback_train
 from mjx_protamer.experiments.run_log import flatten
 from mjx_protamer.experiments.runner import run_chunks
+from mjx_protamer.experiments.stats import pearson
 from mjx_protamer.experiments.table2.artifacts import write_table2
 from mjx_protamer.experiments.table2.config import Table2Config
 from mjx_protamer.experiments.table2.models import load_condition_models, save_condition_models
@@ -224,8 +225,8 @@ def pooled_corr(ft, reward_models: dict, untrained_params, test_states: dict) ->
     out = {}
     for name in names:
         r_hat = np.asarray(apply(reward_models[name], obs, action))
-        out[name] = [{"r_hat_corr_pooled": _corr(r_hat[i], score[i]),
-                      "r_hat_corr_pooled_untrained": _corr(r_hat0[i], score[i])} for i in range(len(obs))]
+        out[name] = [{"r_hat_corr_pooled": pearson(r_hat[i], score[i]),
+                      "r_hat_corr_pooled_untrained": pearson(r_hat0[i], score[i])} for i in range(len(obs))]
     return out
 
 
@@ -275,16 +276,10 @@ def make_seed_evaluator(cfg: Table2Config, env, ft):
             ev["per_episode"]["episode_return"] = [float(r) for r in returns]
             ev["teacher_score"] = float(score[i].mean())
             ev["per_episode"]["teacher_score"] = [float(x) for x in score[i].mean(axis=1)]
-            ev["r_hat_corr_test"] = _corr(np.ravel(r_hat[i]), np.ravel(score[i]))
-            ev["r_hat_corr_untrained"] = _corr(np.ravel(r_hat0[i]), np.ravel(score[i]))
+            ev["r_hat_corr_test"] = pearson(np.ravel(r_hat[i]), np.ravel(score[i]))
+            ev["r_hat_corr_untrained"] = pearson(np.ravel(r_hat0[i]), np.ravel(score[i]))
             out.append(ev)
         return out, sample
 
     return evaluate
 
-
-def _corr(x: np.ndarray, y: np.ndarray) -> float | None:
-    """Pearson correlation; None where either side is constant (no variation to track)."""
-    x, y = x - x.mean(), y - y.mean()
-    den = float(np.sqrt(np.sum(x * x) * np.sum(y * y)))
-    return float(np.sum(x * y) / den) if den > 1e-12 else None
