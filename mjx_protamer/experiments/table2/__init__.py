@@ -20,8 +20,8 @@ import is re-exported here.
 from mjx_protamer.experiments.stats import contrast, seed_stats
 from mjx_protamer.experiments.table2.artifacts import (plot_regions, plot_training, write_condition_body_maps,
                                                        write_table2)
-from mjx_protamer.experiments.table2.config import (DEFAULT_CONDITIONS, Condition, Table2Config,
-                                                    builtin_table2_config, load_table2_config)
+from mjx_protamer.experiments.table2.config import (DEFAULT_CONDITIONS, DEFAULT_CONFIG, Condition, Table2Config,
+                                                    load_table2_config)
 from mjx_protamer.experiments.table2.models import (finished_condition_cli, load_condition_agents,
                                                     load_condition_models, load_condition_reward_models,
                                                     load_finished_condition, save_condition_models)
@@ -30,9 +30,10 @@ from mjx_protamer.experiments.table2.report import (LABELS, PAPER, SELECTION_MET
 from mjx_protamer.experiments.table2.run import (STATE_STRIDE, Trained, make_seed_evaluator, memory_per_seed,
                                                  pooled_corr, run_table2, train_table2)
 
-__all__ = ["DEFAULT_CONDITIONS", "LABELS", "PAPER", "SELECTION_METRICS", "STATE_STRIDE", "Condition", "Table2Config",
-           "Trained", "builtin_table2_config", "contrast", "finished_condition_cli", "format_markdown",
+__all__ = ["DEFAULT_CONDITIONS", "DEFAULT_CONFIG", "LABELS", "PAPER", "SELECTION_METRICS", "STATE_STRIDE",
+           "Condition", "Table2Config", "Trained", "contrast", "finished_condition_cli", "format_markdown",
            "load_condition_agents", "load_condition_models", "load_condition_reward_models",
-           "load_finished_condition", "load_table2_config", "make_seed_evaluator", "memory_per_seed", "plot_regions",
-           "plot_training", "pooled_corr", "reward_preset_name", "run_table2", "save_condition_models",
-           "seed_stats", "summarize", "train_table2", "write_condition_body_maps", "write_table2"]
+           "load_finished_condition", "load_table2_config", "make_seed_evaluator", "memory_per_seed",
+           "plot_regions", "plot_training", "pooled_corr", "reward_preset_name", "run_table2",
+           "save_condition_models", "seed_stats", "summarize", "train_table2", "write_condition_body_maps",
+           "write_table2"]

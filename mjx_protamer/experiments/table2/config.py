@@ -7,7 +7,7 @@ import dataclasses
 from typing import Literal
 
 from mjx_protamer.agents.ddpg.config import PretrainConfig
-from mjx_protamer.config import ConfigError, check, check_seed, to_dict
+from mjx_protamer.config import ConfigError, check, check_seed, from_dict, read_raw, shipped_config
 from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig
 from mjx_protamer.human.feedback_config import FeedbackConfig
 
@@ -47,41 +47,16 @@ class Table2Config:
         check(self.moving_average >= 1, "moving_average", f"must be >= 1, got {self.moving_average}")
 
 
-def builtin_table2_config() -> Table2Config:
-    """What `reproduce table2` runs without --config: configs/table2_attention.yaml (a test holds them equal),
-    the setting whose Table II meets issue 8's targets on 5 seeds (docs/results/table2_attention_asinh/).
-
-    Against `Table2Config()`, the base a YAML file's missing keys take: the pretraining default with the
-    movement band from 1.5 rad/s and DDPG's step size decayed to 0.1x over the run's second half (the
-    baseline's freeze holds on 10 seeds); beta 1; the lateral teacher rule; watched silences as 0 labels
-    worth an event; the posterior credit (T = 3); a bounded reward model reading asinh of the touch forces;
-    100 replay minibatches a chunk from a 1e5-row buffer. Each change and its measurement: docs/experiments.md.
-    """
-    from mjx_protamer.human.credit import CreditConfig
-    from mjx_protamer.human.reward_model import RewardModelConfig
-    from mjx_protamer.human.teachers import LATERAL_RULE, TeacherConfig
-
-    pre = PretrainConfig()
-    pre = dataclasses.replace(
-        pre, env=dataclasses.replace(pre.env, reward=dataclasses.replace(pre.env.reward, speed_low=1.5)),
-        ddpg=dataclasses.replace(pre.ddpg, reward_beta=1.0, lr_final_fraction=0.1, lr_decay_from=0.5))
-    feedback = FeedbackConfig(
-        credit=CreditConfig(silence_weight=1.0, silence_needs_attention=True, posterior_temperature=3.0),
-        reward_model=RewardModelConfig(buffer_size=100_000, bounded=True, asinh_obs=True),
-        teacher=TeacherConfig(rule=LATERAL_RULE))
-    return Table2Config(pretrain=pre, feedback=feedback,
-                        batched=BatchedFeedbackConfig(replay_updates_per_chunk=100))
+# What `reproduce table2` runs without --config (a file shipped with the package, `config.shipped_config`): the
+# setting whose Table II meets issue 8's targets on 5 seeds (docs/results/table2_attention_asinh/); what it changes
+# against `Table2Config()` and each change's measurement: the file's comments and docs/experiments.md.
+DEFAULT_CONFIG = "table2_attention.yaml"
 
 
 def load_table2_config(path=None, overrides=None, seeds: int | None = None) -> Table2Config:
-    """From a YAML file (its missing keys take `Table2Config()`'s defaults) or, with no file, the built-in
-    default (`builtin_table2_config`); `a.b=value` overrides apply to either."""
-    from mjx_protamer.config import apply_overrides, from_dict, read_raw
-
-    if path is None:
-        raw = apply_overrides(to_dict(builtin_table2_config()), list(overrides or []))
-    else:
-        raw = read_raw(path, overrides)
+    """From a YAML file, by default the shipped DEFAULT_CONFIG (its missing keys take `Table2Config()`'s
+    defaults), with `a.b=value` overrides."""
+    raw = read_raw(shipped_config(DEFAULT_CONFIG) if path is None else path, overrides)
     if seeds is not None:
         if seeds < 1:
             raise ConfigError(f"--seeds must be >= 1, got {seeds}")

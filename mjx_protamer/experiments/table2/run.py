@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mjx_protamer.agents.ddpg import selection
-from mjx_protamer.config import ConfigError, to_dict
+from mjx_protamer.config import ConfigError, check_resume_config, to_dict
 from mjx_protamer.experiments import metrics as M
 from mjx_protamer.experiments.evaluate import validation_seed
 from mjx_protamer.experiments.feedback_train import human_reward, make_feedback_train
@@ -85,11 +85,10 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     memory.check_seeds_fit(memory_per_seed(cfg, env, ft), len(cfg.seeds), resolve_devices(tc.num_devices),
                            f"reproduce table2 ({len(cfg.conditions)} conditions, one at a time)",
                            "lower ddpg.replay_size, train.num_envs or train.eval_episodes")
-    saved = yaml.safe_dump(to_dict(cfg), sort_keys=False)
-    if resume and (out / "config.yaml").read_text() != saved:
-        raise ConfigError(f"--resume: the config differs from the one saved in {out / 'config.yaml'}")
+    if resume:
+        check_resume_config(out / "config.yaml", cfg)
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "config.yaml", saved)
+    write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
     training: list[dict] = []
     evals: dict[str, dict[int, dict]] = {c.name: {} for c in cfg.conditions}
     wall: dict[str, list[float]] = {c.name: [] for c in cfg.conditions}
