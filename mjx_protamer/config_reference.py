@@ -21,7 +21,7 @@ import typing
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-CONFIGS = ROOT / "configs"
+CONFIGS = Path(__file__).resolve().parent / "configs"  # the shipped files (package data; configs/ links here)
 PAGE = ROOT / "docs" / "config.md"
 
 

@@ -28,7 +28,7 @@ def register(subparsers) -> None:
         "figure1_training_reward.png and figure2_unique_regions.png.",
     )
     t.add_argument("--config", type=Path, default=None,
-                   help="YAML (default: the built-in default, equal to configs/table2_attention.yaml: "
+                   help="YAML (default: configs/table2_attention.yaml, shipped with the package: "
                    "habituation, the lateral rule (right hand +1, left -1), asinh reward-model inputs; configs/table2.yaml is the "
                    "earlier head rule without habituation, configs/table2_paper.yaml the paper's single-env "
                    "20-episode setting)")

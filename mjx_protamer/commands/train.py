@@ -130,16 +130,15 @@ def _feedback_setup(spec: str, raw: dict, overrides: list[str]):
     of configs/feedback_KIND.yaml), with the channel of the flag."""
     import dataclasses
 
-    from mjx_protamer.config import apply_overrides, from_dict, to_dict
-    from mjx_protamer.experiments.feedback_train import (BatchedFeedbackConfig, default_feedback_config,
-                                                         parse_feedback, step_window_note)
+    from mjx_protamer.config import apply_overrides, from_dict, read_raw, shipped_config
+    from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, parse_feedback, step_window_note
     from mjx_protamer.experiments.pretrain import FeedbackSetup
     from mjx_protamer.human.feedback_config import FeedbackConfig
     from mjx_protamer.human.teachers import with_channel
 
     kind = parse_feedback(spec)
-    sections = {"feedback": _section(raw, "feedback") if "feedback" in raw else to_dict(default_feedback_config(kind)),
-                "batched": _section(raw, "batched")}
+    source = raw if "feedback" in raw else read_raw(shipped_config(f"feedback_{kind}.yaml"))
+    sections = {"feedback": _section(source, "feedback"), "batched": _section(raw, "batched")}
     apply_overrides(sections, overrides)
     fb = from_dict(FeedbackConfig, sections["feedback"], "feedback")
     file_kind = fb.teacher.channel.kind

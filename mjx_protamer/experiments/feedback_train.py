@@ -390,16 +390,6 @@ def log_events(log, events: dict, kind: str, feedback, dt: float) -> int:
     return n
 
 
-def default_feedback_config(kind: str):
-    """The feedback section of configs/feedback_<kind>.yaml: credit over the channel's delay distribution."""
-    from mjx_protamer.human.feedback_config import FeedbackConfig
-
-    base = FeedbackConfig()
-    return dataclasses.replace(base, credit=dataclasses.replace(base.credit, scheme="channel", silence_weight=0.03),
-                               reward_model=dataclasses.replace(base.reward_model, bounded=True),
-                               teacher=with_channel(base.teacher, kind))
-
-
 def parse_feedback(spec: str) -> str:
     """'simulated:keyboard' -> 'keyboard' (the kinds the in-jit teacher simulates)."""
     if not spec.startswith("simulated:") or spec.split(":", 1)[1] not in KINDS:

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import yaml
 
 from mjx_protamer.atomic import write_atomic
-from mjx_protamer.config import ConfigError, read_raw, to_dict
+from mjx_protamer.config import ConfigError, check_resume_config, to_dict
 from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner, saved_reward_model
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate, validation_seed
 from mjx_protamer.experiments.run_loader import CONFIG_NAME, SELECTED_DIR
@@ -60,8 +60,8 @@ def run_pretrain(
         if not existing:
             raise ConfigError(f"--resume: {out} holds no checkpoint to continue from; leave out --resume to "
                               f"start a new run (in a new or empty --out), or give the --out of the run to continue")
-        if config_path.is_file() and read_raw(config_path) != saved:
-            raise ConfigError(f"--resume: the config differs from the one saved in {config_path}")
+        if config_path.is_file():
+            check_resume_config(config_path, config)
     elif existing:
         raise ConfigError(f"{out} already holds a run (checkpoint {existing[-1]}); pass --resume or another --out")
 

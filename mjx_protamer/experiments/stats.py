@@ -1,4 +1,5 @@
-"""Statistics over seeds (or checkpoints): means with Student-t 95% intervals, per-seed values, paired contrasts.
+"""Statistics over seeds (or checkpoints): means with Student-t 95% intervals, per-seed values, paired contrasts;
+and the correlation every r_hat score reports.
 
 One place for what every table of the project reports (Table II, the live sessions, the screens).
 """
@@ -39,3 +40,12 @@ def contrast(baseline, values) -> dict:
             "beyond_ci95_sum": bool(cond["mean"] - base["mean"] > base["ci95"] + cond["ci95"]),
             "paired": paired,
             "paired_beyond_zero": None if paired["ci95"] is None else bool(paired["mean"] - paired["ci95"] > 0)}
+
+
+def pearson(x, y) -> float | None:
+    """Pearson correlation of two equally long arrays; None where either side is constant (no variation to track,
+    where NumPy would give NaN and a warning)."""
+    x, y = np.asarray(x), np.asarray(y)
+    x, y = x - x.mean(), y - y.mean()
+    den = float(np.sqrt(np.sum(x * x) * np.sum(y * y)))
+    return float(np.sum(x * y) / den) if den > 1e-12 else None

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from mjx_protamer.cli_numbers import number as _number  # noqa: F401  (commands import it from here)
-from mjx_protamer.config import MAX_CONFIG_BYTES, ConfigError, check_config_size, to_dict  # noqa: F401
+from mjx_protamer.config import MAX_CONFIG_BYTES, ConfigError, check_config_size, shipped_config, to_dict  # noqa: F401
 from mjx_protamer.human.feedback_config import SESSION_DDPG_KEYS, FeedbackRunConfig, load_feedback_config
 
 LIVE = ("keyboard", "prosody", "whisper", "web")
@@ -23,7 +23,7 @@ FEEDBACK_CHOICES = (*LIVE, *SIMULATED, "none")
 LEARNERS = ("ddpg", "coach")
 # A session's feedback config without --config (the channel follows --feedback: the shipped files differ in it
 # alone). Without it a session would run the dataclass defaults: an unbounded reward model, no silences, beta 0.1.
-DEFAULT_FEEDBACK_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "feedback_keyboard.yaml"
+DEFAULT_FEEDBACK_CONFIG = shipped_config("feedback_keyboard.yaml")
 
 
 def check_config_file(path: Path | None, flag: str = "--config") -> None:

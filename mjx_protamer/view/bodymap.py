@@ -72,23 +72,3 @@ def write_body_map(frequency, path: str | Path, title: str = "", env_config=None
         plt.close(fig)
     return path
 
-
-def write_condition_body_maps(run_config, evals: dict, out_dir: str | Path) -> list[Path]:
-    """Table II: one body map per condition (region frequencies averaged over its seeds), as
-    body_map_<condition>.png in out_dir. Nothing for the toy env; a machine without offscreen OpenGL
-    gets a note instead of the pictures."""
-    import sys
-
-    from mjx_protamer.view.gl import GLUnavailable
-
-    if run_config.env_name == "toy":
-        return []
-    paths = []
-    try:
-        for name, per_seed in evals.items():
-            freq = np.mean([ev["region_touch_frequency"] for ev in per_seed.values()], axis=0)
-            paths.append(write_body_map(freq, Path(out_dir) / f"body_map_{name}.png",
-                                        f"{name}: where the hands touch ({len(per_seed)} seed(s))", run_config.env))
-    except GLUnavailable as e:
-        print(f"note: no body maps: {e}", file=sys.stderr)
-    return paths

@@ -122,6 +122,20 @@ def test_resume_with_feedback_is_exact(keyboard_run):
     assert ea == eb
 
 
+@pytest.mark.parametrize("kind", ["keyboard", "prosody", "speech"])
+def test_feedback_without_a_feedback_section_runs_the_shipped_feedback_kind_yaml(kind):
+    """`pretrain --feedback simulated:KIND` with no feedback section in --config takes configs/feedback_KIND.yaml's
+    (the channel's credit, watched silences at 1/32, a bounded reward model), read from the package."""
+    from mjx_protamer.commands.train import _feedback_setup
+    from mjx_protamer.config import shipped_config
+    from mjx_protamer.human.feedback_config import load_feedback_config
+
+    setup = _feedback_setup(f"simulated:{kind}", {}, ["feedback.credit.decay=0.8"])
+    shipped = load_feedback_config(shipped_config(f"feedback_{kind}.yaml"), ["feedback.credit.decay=0.8"]).feedback
+    assert setup.kind == kind and setup.config == shipped and setup.config.teacher.channel.kind == kind
+    assert (setup.config.credit.silence_weight, setup.config.reward_model.bounded) == (0.03, True)
+
+
 def test_feedback_flag_errors_name_the_problem(tmp_path, capsys):
     pre, fb = write_configs(tmp_path)
     assert main(["pretrain", "--config", str(pre), "--feedback", "keyboard", "--out", str(tmp_path / "x")]) == 2

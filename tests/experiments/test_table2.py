@@ -61,13 +61,13 @@ def test_table2_writes_table_and_figures(tmp_path, capsys):
     assert np.all(np.isfinite(jax.vmap(critic.apply)(params["critic"], obs, action)))
     with pytest.raises(ConfigError, match="agents/DTX is missing"):
         load_condition_agents(out, load_table2_config(out / "config.yaml"), "DTX", obs.shape[-1], action.shape[-1])
-    # the diagnostics in scripts/ read a finished condition's test states, and name what to fix when there are none
-    from mjx_protamer.experiments.table2 import finished_condition_cli
+    # `protamer analyze` reads a finished condition's test states, and names what to fix when there are none
+    from mjx_protamer.experiments.table2 import load_finished_condition
 
-    _, _, states = finished_condition_cli("diagnostic", [str(out), "--condition", "DTK"])
+    _, states = load_finished_condition(out, "DTK")
     np.testing.assert_array_equal(states["obs"], obs)
-    with pytest.raises(SystemExit, match="test_states_DTX.npz is missing: give the --out directory"):
-        finished_condition_cli("diagnostic", [str(out), "--condition", "DTX"])
+    with pytest.raises(ConfigError, match="test_states_DTX.npz is missing: give the --out directory"):
+        load_finished_condition(out, "DTX")
     # the saved agents scored again without training: the same test episodes (the run's behaviour metrics); the
     # run's own rule gives its teacher scores, the rule with every clause's value negated their negation
     assert main(["reproduce", "rescore", str(out), "--config", str(cfg), "--out", str(tmp_path / "same"),

@@ -63,9 +63,34 @@ def test_table_names_the_reward_preset_and_what_a_config_changed_in_it():
                      "table2_habituation.yaml": "infant (speed_low 1.5)"}
 
 
-def test_builtin_default_is_configs_table2_attention_yaml():
-    """`reproduce table2` without --config runs the setting whose table the README reports."""
-    assert load_table2_config() == load_table2_config(CONFIGS / "table2_attention.yaml")
+def test_reproduce_table2_without_config_runs_the_yaml_shipped_in_the_package(tmp_path, monkeypatch, capsys):
+    """`reproduce table2` without --config runs configs/table2_attention.yaml (the setting whose table the README
+    reports), read from the package, not from the checkout: the file is package data that a wheel ships."""
+    import tomllib
+
+    import mjx_protamer
+    from mjx_protamer.cli import main
+    from mjx_protamer.config import shipped_config
+    from mjx_protamer.experiments import table2
+
+    shipped = shipped_config("table2_attention.yaml")
+    assert shipped.parent == Path(mjx_protamer.__file__).parent / "configs" and not shipped.is_symlink()
+    assert shipped.resolve() == (CONFIGS / "table2_attention.yaml").resolve()  # configs/ links to the package's
+    package_data = tomllib.loads((CONFIGS.parent / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    assert "configs/*.yaml" in package_data["mjx_protamer"]
+    ran = []
+
+    def run_table2(cfg, out, progress=True, resume=False):
+        ran.append(cfg)
+        (out / "table2.md").write_text("table\n")
+        return {"table_md": str(out / "table2.md"), "wall_s": 0.0,
+                **{k: "" for k in ("table_json", "figure1", "figure2", "training_csv")}}
+
+    monkeypatch.setattr(table2, "run_table2", run_table2)
+    assert main(["reproduce", "table2", "--out", str(tmp_path / "t2"), "--quiet"]) == 0
+    assert ran == [load_table2_config(shipped)]
+    assert [(c.signal, c.value) for c in ran[0].feedback.teacher.rule] == [("obs_norm:26:52", 1.0),
+                                                                          ("obs_norm:0:26", -1.0)]
 
 
 def test_overrides_without_a_file_change_only_what_they_name():

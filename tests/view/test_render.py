@@ -162,7 +162,7 @@ def test_render_and_eval_body_map_of_a_self_touch_run(gl_backend, tmp_path):
 
 def test_table2_body_maps_one_per_condition_averaged_over_seeds(gl_backend, tmp_path):
     from mjx_protamer.agents.ddpg.config import PretrainConfig
-    from mjx_protamer.view.bodymap import write_condition_body_maps
+    from mjx_protamer.experiments.table2.artifacts import write_condition_body_maps
 
     f = np.eye(8)
     evals = {"DDPG": {0: {"region_touch_frequency": f[0] * 0.2}, 1: {"region_touch_frequency": f[0] * 0.4}},

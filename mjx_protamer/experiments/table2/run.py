@@ -1,0 +1,284 @@
+"""Train and test every condition of Table II: `train_table2` (the conditions one after another, each on every
+seed at once) and `run_table2` (that, then the table, figures and body maps of `artifacts.write_table2`).
+
+Every condition runs the same compiled program (`feedback_train.make_feedback_train`): the channel, credit
+weights and human-reward gain are values, and DDPG alone is the gain-0, silent-teacher case (its reward is bit
+for bit DDPG's). DDPG's random stream does not depend on the feedback path, so for a seed the four conditions
+start from the same networks, envs and exploration noise. Each trained policy is evaluated on `eval_episodes`
+test episodes with the deterministic actor (the same test seed for every condition).
+
+How well r_hat learned its teacher is measured twice. `r_hat_corr_test` correlates r_hat with the hidden score
+on the condition's own test states; a policy that complies visits states whose score barely varies, so that
+figure is mostly noise once feedback has worked. `r_hat_corr_pooled` correlates it on the pooled test states of
+every condition of the same seed (the same states for every reward model), which span what the teacher judges.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mjx_protamer.agents.ddpg import selection
+from mjx_protamer.config import ConfigError, check_resume_config, to_dict
+from mjx_protamer.experiments import metrics as M
+from mjx_protamer.experiments.evaluate import validation_seed
+from mjx_protamer.experiments.feedback_train import human_reward, make_feedback_train
+from mjx_protamer.experiments.run_log import flatten
+from mjx_protamer.experiments.runner import run_chunks
+from mjx_protamer.experiments.stats import pearson
+from mjx_protamer.experiments.table2.artifacts import write_table2
+from mjx_protamer.experiments.table2.config import Table2Config
+from mjx_protamer.experiments.table2.models import load_condition_models, save_condition_models
+from mjx_protamer.experiments.table2.report import SELECTION_METRICS
+
+STATE_STRIDE = 5  # every 5th test step (25 ms) is kept for the pooled score: neighbours are near copies
+
+
+def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False) -> dict:
+    """Every condition's results are written atomically as it finishes (`condition_<name>.json`): a run
+    killed at any moment loses at most the condition it was training, and `resume` continues it."""
+    t_all = time.perf_counter()
+    trained = train_table2(cfg, out_dir, progress, resume)
+    return write_table2(cfg, out_dir, trained, time.perf_counter() - t_all)
+
+
+@dataclasses.dataclass
+class Trained:
+    """What `train_table2` hands to `write_table2`: every chunk's training row, each condition's test results
+    per seed (`evals[name][seed]`) and its training seconds (`wall[name]`). Plain Python: JSON round-trips it
+    (`experiments/distributed.py` gathers it from every process)."""
+    training: list[dict]
+    evals: dict[str, dict[int, dict]]
+    wall: dict[str, list[float]]
+
+
+def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False) -> Trained:
+    """Train and test every condition on `cfg.seeds` (vmapped in one program), writing each condition's results
+    and agents into `out_dir` as it finishes; the pooled reward-model score at the end. No table or figures:
+    `write_table2` makes them."""
+    from mjx_protamer.atomic import write_atomic
+    from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
+
+    cfg = dataclasses.replace(cfg, pretrain=with_resolved_backend(cfg.pretrain, announce=progress))
+    out = Path(out_dir)
+    import yaml
+
+    done = {c.name: out / f"condition_{c.name}.json" for c in cfg.conditions}
+    if resume:
+        if not (out / "config.yaml").is_file():
+            raise ConfigError(f"--resume: {out} holds no table2 run to continue; leave out --resume to start one there")
+    elif any(p.is_file() for p in done.values()):
+        raise ConfigError(f"{out} already holds a table2 run; pass --resume to continue it, or another --out")
+    pre = cfg.pretrain
+    tc = pre.train
+    env = make_env(pre)
+    ft = make_feedback_train(pre, env, cfg.feedback, cfg.batched)
+    # Every seed's state side by side, and what the run keeps of every condition: refused before allocating
+    from mjx_protamer.agents.ddpg.train import resolve_devices
+    from mjx_protamer.experiments import memory
+
+    memory.check_seeds_fit(memory_per_seed(cfg, env, ft), len(cfg.seeds), resolve_devices(tc.num_devices),
+                           f"reproduce table2 ({len(cfg.conditions)} conditions, one at a time)",
+                           "lower ddpg.replay_size, train.num_envs or train.eval_episodes")
+    if resume:
+        check_resume_config(out / "config.yaml", cfg)
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
+    training: list[dict] = []
+    evals: dict[str, dict[int, dict]] = {c.name: {} for c in cfg.conditions}
+    wall: dict[str, list[float]] = {c.name: [] for c in cfg.conditions}
+    # Seeds run side by side in one program: init, every chunk and the test episodes are vmapped over them.
+    seeds = np.asarray(cfg.seeds, np.uint32)  # any seed in 0..2^32-1 (the same keys as int32 below 2^31)
+    keys = jax.vmap(jax.random.PRNGKey)(seeds)
+    init = jax.jit(jax.vmap(ft.trainer.init))
+    init_feedback = jax.jit(jax.vmap(ft.init))
+    chunk_fn = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)), donate_argnums=(0, 1))
+    # The tested snapshot (train.select_every_chunks > 0): validation episodes of each seed's own stream
+    validate = jax.jit(jax.vmap(selection.make_validate(
+        env, tc.episode_length, pre.ddpg.actor_hidden, pre.ddpg.reward_alpha, pre.ddpg.reward_beta,
+        human_reward(ft.apply)), in_axes=(0, {"params": 0, "gain": None}, 0)))
+    keep = jax.jit(jax.vmap(selection.keep_better, in_axes=(0, 0, 0, None)))
+    val_keys = jnp.stack([jax.random.split(jax.random.PRNGKey(validation_seed(dataclasses.replace(
+        pre, train=dataclasses.replace(tc, seed=int(s))))), tc.select_episodes) for s in cfg.seeds])
+    untrained = init_feedback(seeds).rm_params
+    evaluate_seeds = make_seed_evaluator(cfg, env, ft)  # traced once for every condition and actor
+    reward_models: dict[str, object] = {}
+    test_states: dict[str, dict] = {}
+    for cond in cfg.conditions:
+        if done[cond.name].is_file():  # finished before an interruption (resume)
+            reward_models[cond.name], test_states[cond.name] = load_condition_models(out, cond.name, untrained)
+            kept = json.loads(done[cond.name].read_text())
+            training += kept["training"]
+            evals[cond.name] = {int(k): v for k, v in kept["evals"].items()}
+            wall[cond.name].append(kept["train_wall_s"])
+            if progress:
+                print(f"[{cond.name}] kept from {done[cond.name]}", flush=True)
+            continue
+        kind = None if cond.channel == "none" else cond.channel
+        credit = dataclasses.replace(cfg.feedback.credit, scheme=cond.credit)
+        t0 = time.perf_counter()
+        fp = ft.params(kind, credit)
+        fp = fp._replace(gain=fp.gain * cond.beta_scale)
+
+        chunks_run, validations = [0], []
+
+        def step(state):  # called within this iteration: fp, cond and t0 are this condition's
+            ts, fs, m, _ = chunk_fn(*state[:2], fp)
+            kept = state[2]
+            chunks_run[0] += 1
+            if selection.is_candidate(chunks_run[0], tc.num_chunks, tc.select_every_chunks, tc.select_from):
+                score, speed = validate(ts.actor_params, {"params": fs.rm_params, "gain": fp.gain}, val_keys)
+                kept = keep(jax.vmap(selection.init)(ts.actor_params) if kept is None else kept, ts.actor_params, score,
+                            chunks_run[0])
+                validations.append({"chunk": chunks_run[0], "score": np.asarray(score).tolist(), "freeze_ratio":
+                                    np.mean(np.asarray(speed) < pre.env.freeze_speed, axis=(1, 2)).tolist()})
+            return (ts, fs, kept), m, None
+
+        def progress_fn(info):
+            rows = [{"condition": cond.name, "seed": int(seed), "chunk": info.chunk,
+                     **flatten(jax.tree.map(lambda x, i=i: x[i], info.metrics), env.reward_term_names)}
+                    for i, seed in enumerate(cfg.seeds)]
+            training.extend(rows)
+            if progress and (info.chunk % max(1, tc.num_chunks // 5) == 0 or info.chunk == tc.num_chunks):
+                print(f"[{cond.name}, {len(seeds)} seeds] chunk {info.chunk}/{tc.num_chunks} return "
+                      f"{np.nanmean([r['episode_return'] for r in rows]):.1f} contact "
+                      f"{np.mean([r['contact_rate'] for r in rows]):.2f} feedback "
+                      f"{np.mean([r['feedback_total'] for r in rows]):.0f} r_hat corr "
+                      f"{np.mean([r['r_hat_score_corr'] for r in rows]):+.2f} "
+                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
+
+        ts, fs, kept = run_chunks(step, (init(keys), init_feedback(seeds), None), tc.num_chunks,
+                                  tc.chunk_steps * tc.num_envs * len(seeds), progress_fn=progress_fn).state
+        train_s = time.perf_counter() - t0
+        tested = ts.actor_params if kept is None else kept.actor_params
+        results, test_states[cond.name] = evaluate_seeds(tested, fs.rm_params, untrained)
+        # With selection, the last actor meets the same test episodes too: what selection changed is then a
+        # paired difference on one training run, not a comparison across runs
+        last_results = None if kept is None else evaluate_seeds(ts.actor_params, fs.rm_params, untrained)[0]
+        reward_models[cond.name] = fs.rm_params
+        save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name],
+                               {"actor": tested, "critic": ts.critic_params})
+        kept_chunk = None if kept is None else np.asarray(kept.chunk)
+        for i, seed in enumerate(cfg.seeds):
+            ev = results[i]
+            if kept is not None:  # which snapshot was tested, and what each candidate validated at
+                ev["selection"] = {"tested_chunk": int(kept_chunk[i]), "candidates": [
+                    {"chunk": v["chunk"], "score": v["score"][i], "freeze_ratio": v["freeze_ratio"][i]}
+                    for v in validations], "last_actor": {k: last_results[i][k] for k in SELECTION_METRICS}}
+            last = [r for r in training if r["condition"] == cond.name and r["seed"] == seed][-1]
+            ev["feedback"] = {k: last[k] for k in ("feedback_total", "feedback_pos_total", "feedback_neg_total",
+                                                   "credited_rows_total", "rm_updates_total", "r_hat_score_corr")}
+            ev["train_wall_s"] = train_s
+            evals[cond.name][seed] = ev
+            write_atomic(out / f"eval_{cond.name}_seed{seed}.json", json.dumps(ev, indent=2))
+        wall[cond.name].append(train_s)
+        write_atomic(done[cond.name], json.dumps({
+            "training": [r for r in training if r["condition"] == cond.name], "train_wall_s": train_s,
+            "evals": {str(k): v for k, v in evals[cond.name].items()}}))
+    pooled = pooled_corr(ft, reward_models, untrained, test_states)
+    for name, per_seed in pooled.items():
+        for i, seed in enumerate(cfg.seeds):
+            evals[name][seed].update(per_seed[i])
+            write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(evals[name][seed], indent=2))
+    return Trained(training, evals, wall)
+
+
+def memory_per_seed(cfg: Table2Config, env, ft) -> dict[str, int]:
+    """Bytes one seed of a table2 run holds at its peak, by part, from abstract shapes (`jax.eval_shape`: nothing
+    is allocated): the learner's state with its replay and the feedback state of the condition training now
+    (conditions run one after another), the kept snapshot (train.select_every_chunks), the test episodes' signals
+    and env states, and what the run keeps of every condition until the end (reward models, sampled test
+    states)."""
+    from mjx_protamer.experiments.memory import tree_bytes
+
+    pre = cfg.pretrain
+    tc = pre.train
+    key = jax.random.PRNGKey(0)
+    learner = jax.eval_shape(ft.trainer.init, key)
+    feedback = jax.eval_shape(ft.init, jnp.uint32(0))
+    episodes, steps = tc.eval_episodes, tc.episode_length
+    floats = env.observation_size + env.action_size + len(env.reward_term_names) + 8 + 3  # a step's signals
+    test = episodes * (steps * (floats + 3) * 4 + tree_bytes(jax.eval_shape(env.reset, key)))
+    sampled = episodes * (-(-steps // STATE_STRIDE)) * (env.observation_size + env.action_size + 1) * 4
+    return {"learner state and replay": tree_bytes(learner), "feedback state": tree_bytes(feedback),
+            "kept snapshot": tree_bytes(learner.actor_params) if tc.select_every_chunks > 0 else 0,
+            "test episodes": test,
+            "kept per condition": len(cfg.conditions) * (tree_bytes(feedback.rm_params) + sampled)}
+
+
+def pooled_corr(ft, reward_models: dict, untrained_params, test_states: dict) -> dict[str, list[dict]]:
+    """Per condition and seed, r_hat's correlation with the hidden score on the pooled test states of every
+    condition of that seed (`r_hat_corr_pooled`), beside the untrained reward model's
+    (`r_hat_corr_pooled_untrained`)."""
+    names = list(test_states)
+    obs = np.concatenate([test_states[n]["obs"] for n in names], axis=1)  # (seeds, states, obs)
+    action = np.concatenate([test_states[n]["action"] for n in names], axis=1)
+    score = np.concatenate([test_states[n]["score"] for n in names], axis=1)
+    apply = jax.jit(jax.vmap(ft.apply))
+    r_hat0 = np.asarray(apply(untrained_params, obs, action))
+    out = {}
+    for name in names:
+        r_hat = np.asarray(apply(reward_models[name], obs, action))
+        out[name] = [{"r_hat_corr_pooled": pearson(r_hat[i], score[i]),
+                      "r_hat_corr_pooled_untrained": pearson(r_hat0[i], score[i])} for i in range(len(obs))]
+    return out
+
+
+def make_seed_evaluator(cfg: Table2Config, env, ft):
+    """`evaluate(actor_params, rm_params, untrained_params) -> (per-seed results, sample)`: test episodes of
+    every seed's deterministic actor (vmapped over seeds): the four metrics, the teacher's mean hidden score
+    on them (`teacher_score`), and how r_hat tracks that score on these held-out states, beside an untrained
+    reward model of the same seed (`r_hat_corr_test`, `r_hat_corr_untrained`). Also every STATE_STRIDE-th
+    test state with its score, per seed (seeds, n, ...), for `pooled_corr`.
+
+    One evaluator serves a whole run: its jitted rollout is traced once, then every condition's tested and
+    last actors reuse it (the parameter shapes are the same)."""
+    from mjx_protamer.agents.ddpg.evaluate import make_rollout
+    from mjx_protamer.experiments.evaluate import eval_seed
+    from mjx_protamer.human.teachers import rule_scores
+
+    pre = cfg.pretrain
+    rollout = make_rollout(env, pre.train.episode_length, pre.ddpg.actor_hidden)
+    episodes = pre.train.eval_episodes
+    keys = jnp.stack([jax.random.split(jax.random.PRNGKey(eval_seed(dataclasses.replace(
+        pre, train=dataclasses.replace(pre.train, seed=int(s))))), episodes) for s in cfg.seeds])
+    teacher = cfg.feedback.teacher
+
+    def run(actor_params, rm_params, untrained_params, keys):
+        sig = rollout(actor_params, keys)
+        score = jax.vmap(lambda o, a, t, r: rule_scores(teacher, ft.signals(o, a, t, r)))(
+            sig["obs"], sig["action"], sig["reward_terms"], sig["region_mask"])
+        r_hat = ft.apply(rm_params, sig["obs"], sig["action"])
+        r_hat0 = ft.apply(untrained_params, sig["obs"], sig["action"])
+        keep = ("reward", "self_contact", "region_mask", "arm_speed")
+        sample = {"obs": sig["obs"][:, ::STATE_STRIDE], "action": sig["action"][:, ::STATE_STRIDE],
+                  "score": score[:, ::STATE_STRIDE]}
+        sample = jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), sample)  # (episodes * steps, ...)
+        return {k: sig[k] for k in keep}, score, r_hat, r_hat0, sample
+
+    run_seeds = jax.jit(jax.vmap(run))
+
+    def evaluate(actor_params, rm_params, untrained_params) -> tuple[list[dict], dict]:
+        sig, score, r_hat, r_hat0, sample = jax.device_get(run_seeds(actor_params, rm_params, untrained_params,
+                                                                     keys))
+        out = []
+        for i in range(len(cfg.seeds)):
+            ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i],
+                             freeze_threshold=pre.env.freeze_speed)
+            returns = np.sum(sig["reward"][i], axis=1)
+            ev["episode_return"] = float(returns.mean())
+            ev["per_episode"]["episode_return"] = [float(r) for r in returns]
+            ev["teacher_score"] = float(score[i].mean())
+            ev["per_episode"]["teacher_score"] = [float(x) for x in score[i].mean(axis=1)]
+            ev["r_hat_corr_test"] = pearson(np.ravel(r_hat[i]), np.ravel(score[i]))
+            ev["r_hat_corr_untrained"] = pearson(np.ravel(r_hat0[i]), np.ravel(score[i]))
+            out.append(ev)
+        return out, sample
+
+    return evaluate
+
