@@ -24,11 +24,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-
-def corr(x, y) -> float | None:
-    x, y = x - x.mean(), y - y.mean()
-    den = np.sqrt(np.sum(x * x) * np.sum(y * y))
-    return float(np.sum(x * y) / den) if den > 1e-12 else None
+from mjx_protamer.experiments.stats import pearson as corr
 
 
 def runs_of(x: np.ndarray):
