@@ -209,30 +209,25 @@ def _warm_chunks(config) -> int:
     return -(-iterations // config.train.chunk_steps) + 1
 
 
-def time_batched_trainer(config, seeds: int, chunks: int, repeats: int) -> dict:
-    """Seconds per chunk of the batched trainer of `config` after its warm-up, `seeds` vmapped in one program
-    (the way `reproduce table2` runs them; 1: the jitted chunk `pretrain` runs), median of `repeats` runs of
-    `chunks` chunks; the physics backend is the one the run would use."""
+def _chunk_runner(config, seeds: int, env):
+    """(init state, step): the jitted chunk of `config`'s trainer, alone (1 seed: what `pretrain` runs) or with
+    `seeds` vmapped in one program (what `reproduce table2` runs)."""
     import jax
     import numpy as np
 
     from mjx_protamer.agents.ddpg.train import make_train
-    from mjx_protamer.experiments.env_factory import make_env
 
-    trainer = make_train(config, make_env(config))
+    trainer = make_train(config, env)
     if seeds == 1:
-        state, chunk = trainer.init(jax.random.PRNGKey(0)), trainer.train_chunk
-        step = lambda s: chunk(s, None)
-    else:
-        keys = jax.vmap(jax.random.PRNGKey)(np.arange(seeds, dtype=np.uint32))
-        state = jax.jit(jax.vmap(trainer.init))(keys)
-        vchunk = jax.jit(jax.vmap(lambda s: trainer.chunk_body(s, None)[:2]), donate_argnums=0)
-        step = vchunk
-    t0 = time.perf_counter()
-    for _ in range(_warm_chunks(config)):
-        state, metrics = step(state)
-    jax.block_until_ready(metrics)
-    warm_s = time.perf_counter() - t0
+        return trainer.init, lambda s: trainer.train_chunk(s, None)
+    init = jax.jit(jax.vmap(trainer.init))
+    keys = jax.vmap(jax.random.PRNGKey)(np.arange(seeds, dtype=np.uint32))
+    return (lambda _: init(keys)), jax.jit(jax.vmap(lambda s: trainer.chunk_body(s, None)[:2]), donate_argnums=0)
+
+
+def _time_chunks(step, state, chunks: int, repeats: int):
+    import jax
+
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
@@ -240,15 +235,49 @@ def time_batched_trainer(config, seeds: int, chunks: int, repeats: int) -> dict:
             state, metrics = step(state)
         jax.block_until_ready(metrics)
         times.append((time.perf_counter() - t) / chunks)
-    return {"chunk_s": statistics.median(times), "chunk_s_runs": times, "warm_up_and_compile_s": warm_s}
+    return state, times
+
+
+def time_batched_trainer(config, seeds: int, chunks: int, repeats: int) -> dict:
+    """Seconds per chunk of the batched trainer of `config` after its warm-up, `seeds` vmapped in one program,
+    median of `repeats` runs of `chunks` chunks; then the same chunks from the same state with no updates (the
+    env stepping the worlds the trained policy visits, acting and replay writes: `no_update_chunk_s`). The
+    physics backend is the one the run would use."""
+    import dataclasses
+
+    import jax
+
+    from mjx_protamer.experiments.env_factory import make_env
+
+    env = make_env(config)
+    init, step = _chunk_runner(config, seeds, env)
+    t0 = time.perf_counter()
+    state = init(jax.random.PRNGKey(0))
+    for _ in range(_warm_chunks(config)):
+        state, metrics = step(state)
+    jax.block_until_ready(metrics)
+    warm_s = time.perf_counter() - t0
+    state, times = _time_chunks(step, state, chunks, repeats)
+    # The env's cost depends on what the policy does (touch sensing runs only for worlds in contact, and a trained
+    # infant touches itself most of the time), so it is timed on the trainer's own worlds, not on random actions.
+    idle = dataclasses.replace(config, train=dataclasses.replace(config.train, updates_per_step=0))
+    _, step0 = _chunk_runner(idle, seeds, env)
+    state, _ = step0(state)  # compile
+    jax.block_until_ready(state)
+    state, times0 = _time_chunks(step0, state, chunks, repeats)
+    return {"chunk_s": statistics.median(times), "chunk_s_runs": times, "warm_up_and_compile_s": warm_s,
+            "no_update_chunk_s": statistics.median(times0), "no_update_chunk_s_runs": times0}
 
 
 def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
     """The batched trainer against its roofline (issue 40): a chunk's updates at the time their own matmuls take
     (`update_dot_shapes` at the run's networks and batch, chained in one jitted scan, measured now) plus its env
-    steps at the rate the env alone steps the same batch (same backend, same scan), measured now. The fraction
-    is roofline time over measured time: 1.0 would mean nothing but the update's arithmetic and the physics
-    costs anything. Keyed by the number of vmapped seeds."""
+    steps. The env's time is given two ways, both measured now: at the rate the env alone steps the same batch
+    with random actions (`bench env`'s protocol: `roofline_chunk_s`, `fraction_of_roofline`), and as the same
+    trainer's chunk without updates from the trained state (the worlds the policy visits, with acting and replay
+    writes: `roofline_trained_worlds_chunk_s`, `fraction_of_roofline_trained_worlds`). The fraction is roofline
+    time over measured time: 1.0 would mean nothing but the update's arithmetic and the env costs anything.
+    Keyed by the number of vmapped seeds."""
     from mjx_protamer.experiments.bench_env import _bench_env
     from mjx_protamer.experiments.env_factory import make_env
 
@@ -267,10 +296,13 @@ def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
         timed = time_batched_trainer(config, seeds, chunks, repeats)
         updates = tc.chunk_steps * tc.updates_per_step * seeds
         update_s, env_s = updates * dot_s, tc.chunk_steps * worlds / env_rate
-        roofline_s = update_s + env_s
+        roofline_s, trained_s = update_s + env_s, update_s + timed["no_update_chunk_s"]
         out["seeds"][str(seeds)] = dict(
             timed, env_steps_per_s_alone=env_rate, roofline_chunk_s=roofline_s, roofline_update_s=update_s,
             roofline_env_s=env_s, fraction_of_roofline=roofline_s / timed["chunk_s"],
+            roofline_trained_worlds_chunk_s=trained_s,
+            fraction_of_roofline_trained_worlds=trained_s / timed["chunk_s"],
+            update_share_beyond_matmuls_s=timed["chunk_s"] - trained_s,
             updates_per_s=updates / timed["chunk_s"], env_steps_per_s=tc.chunk_steps * worlds / timed["chunk_s"],
             run_train_s_projected=tc.num_chunks * timed["chunk_s"], run_train_s_at_roofline=tc.num_chunks * roofline_s)
     return out

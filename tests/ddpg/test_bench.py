@@ -96,5 +96,8 @@ def test_batched_roofline_reports_one_and_vmapped_seeds(tmp_path):
         assert s["roofline_chunk_s"] == pytest.approx(s["roofline_update_s"] + s["roofline_env_s"])
         assert s["roofline_update_s"] == pytest.approx(10 * 2 * n * r["update_matmul_s"])
         assert s["fraction_of_roofline"] == pytest.approx(s["roofline_chunk_s"] / s["chunk_s"])
+        # the env timed on the trainer's own worlds: the same chunk without updates
+        assert s["no_update_chunk_s"] > 0
+        assert s["roofline_trained_worlds_chunk_s"] == pytest.approx(s["roofline_update_s"] + s["no_update_chunk_s"])
         assert s["updates_per_s"] * s["chunk_s"] == pytest.approx(10 * 2 * n)
         assert s["run_train_s_projected"] == pytest.approx(config.train.num_chunks * s["chunk_s"])
