@@ -150,8 +150,8 @@ def _freeze_through_training(sub) -> None:
 def _run_freeze_through_training(args: argparse.Namespace) -> int:
     from mjx_protamer.analyze.freeze_through_training import freeze_through_training
 
-    for line in freeze_through_training(args.config, args.overrides, args.seed, args.every, args.episodes):
-        print(json.dumps(line), flush=True)
+    freeze_through_training(args.config, args.overrides, args.seed, args.every, args.episodes,
+                            report=lambda row: print(json.dumps(row), flush=True))
     return 0
 
 

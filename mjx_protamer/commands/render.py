@@ -101,9 +101,9 @@ def render_episodes(checkpoint, episodes: int, seed, fps: float, size: int):
     import jax
     import numpy as np
 
+    from mjx_protamer.agents.ddpg.evaluate import make_rollout
     from mjx_protamer.experiments.evaluate import eval_seed, load_run
     from mjx_protamer.view.caption import draw_caption
-    from mjx_protamer.view.rollout import make_pose_rollout
     from mjx_protamer.view.scenes import make_scene, step_seconds
 
     config, env, state, step = load_run(checkpoint)
@@ -113,7 +113,8 @@ def render_episodes(checkpoint, episodes: int, seed, fps: float, size: int):
     dt = step_seconds(config)
     stride = max(1, round(1.0 / (fps * dt)))
     seed = eval_seed(config) if seed is None else seed
-    rollout = make_pose_rollout(env, config.train.episode_length, config.ddpg.actor_hidden)
+    rollout = make_rollout(env, config.train.episode_length, config.ddpg.actor_hidden,
+                           keep=("pose", "region_mask", "self_contact"), start=True)
     out = jax.device_get(rollout(state.actor_params, jax.random.split(jax.random.PRNGKey(seed), episodes)))
     frames = []
     names = scene.region_names

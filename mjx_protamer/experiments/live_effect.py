@@ -106,28 +106,20 @@ def _run_session(argv: list[str], out: Path, log=print) -> float:
 
 def scorer(checkpoint: Path, rule_config, episodes: int):
     """score(actor_params) -> the rule's teacher_score and the paper's metrics on the checkpoint's test episodes
-    (the one rollout, agents/ddpg/evaluate.py)."""
+    (the one evaluator, experiments/evaluate.py)."""
     import jax
 
-    from mjx_protamer.agents.ddpg.evaluate import make_rollout
-    from mjx_protamer.experiments import metrics as M
-    from mjx_protamer.experiments.evaluate import eval_seed
+    from mjx_protamer.experiments.evaluate import eval_seed, make_evaluator, summarize
     from mjx_protamer.experiments.run_loader import load_run
     from mjx_protamer.experiments.table2 import load_table2_config
-    from mjx_protamer.human.teachers import env_signal_columns, rule_scores, rule_signals
 
     pre, env, state, _ = load_run(checkpoint)
-    teacher = load_table2_config(rule_config).feedback.teacher
-    cols = env_signal_columns(teacher.signals, env)
-    rollout = make_rollout(env, pre.train.episode_length, pre.ddpg.actor_hidden)
+    evaluate = jax.jit(make_evaluator(pre, env, load_table2_config(rule_config).feedback.teacher))
     keys = jax.random.split(jax.random.PRNGKey(eval_seed(pre)), episodes)
 
     def score(actor_params) -> dict:
-        sig = jax.device_get(rollout(actor_params, keys))
-        s = np.asarray(rule_scores(teacher, rule_signals(cols, sig["obs"], sig["action"], sig["reward_terms"],
-                                                         sig["region_mask"])))
-        ev = M.summarize(sig["self_contact"], sig["region_mask"], sig["arm_speed"], freeze_threshold=pre.env.freeze_speed)
-        return {"teacher_score": float(s.mean()), **{k: float(ev[k]) for k in METRICS[1:]}}
+        ev = summarize(jax.device_get(evaluate(actor_params, keys)), pre.train.episode_length)
+        return {k: float(ev[k]) for k in METRICS}
 
     return score, state.actor_params
 

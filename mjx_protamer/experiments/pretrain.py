@@ -23,7 +23,7 @@ import yaml
 from mjx_protamer.atomic import write_atomic
 from mjx_protamer.config import ConfigError, check_resume_config, to_dict
 from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner, saved_reward_model
-from mjx_protamer.experiments.evaluate import eval_seed, evaluate, validation_seed
+from mjx_protamer.experiments.evaluate import eval_seed, evaluate
 from mjx_protamer.experiments.run_loader import CONFIG_NAME, SELECTED_DIR
 
 
@@ -242,39 +242,25 @@ def report(result: dict) -> str:
 def _with_selection(step, config, env, fb, fb_params, human_reward_fn, human_params, out: Path, start: int):
     """`step` with the snapshot selection after it (the state's last part is the kept snapshot), and the list
     of candidates so far (restored from `selection.json` on resume), which it keeps up to date there."""
-    from mjx_protamer.agents.ddpg import selection
+    from mjx_protamer.experiments.snapshot_selection import SnapshotSelection
 
-    tc, dc = config.train, config.ddpg
     if fb is not None:
         from mjx_protamer.experiments.feedback_train import human_reward
 
         human_fn = human_reward(fb.apply)
+        human_params_of = lambda new: {"params": new[1].rm_params, "gain": fb_params.gain}  # noqa: E731
     else:
         human_fn = human_reward_fn
-    validate = jax.jit(selection.make_validate(env, tc.episode_length, dc.actor_hidden, dc.reward_alpha,
-                                               dc.reward_beta, human_fn))
-    keep = jax.jit(selection.keep_better)
-    keys = jax.random.split(jax.random.PRNGKey(validation_seed(config)), tc.select_episodes)
+        human_params_of = lambda new: human_params  # noqa: E731
     path = out / "selection.json"
     candidates = [c for c in json.loads(path.read_text())["candidates"] if c["chunk"] <= start] \
         if start and path.is_file() else []
-    chunk = [start]
 
-    def selecting_step(parts):
-        new, metrics, extra = step(parts[:-1])
-        kept = parts[-1]
-        chunk[0] += 1
-        if selection.is_candidate(chunk[0], tc.num_chunks, tc.select_every_chunks, tc.select_from):
-            actor = new[0].actor_params
-            hp = {"params": new[1].rm_params, "gain": fb_params.gain} if fb is not None else human_params
-            score, speed = validate(actor, hp, keys)
-            kept = keep(kept, actor, score, chunk[0])
-            candidates.append({"chunk": chunk[0], "score": float(score),
-                               "freeze_ratio": float(jnp.mean(speed < config.env.freeze_speed))})
-            write_atomic(path, json.dumps({"candidates": candidates}, indent=2).encode())
-        return new + (kept,), metrics, extra
+    def save(candidates):
+        write_atomic(path, json.dumps({"candidates": candidates}, indent=2).encode())
 
-    return selecting_step, candidates
+    return SnapshotSelection(config, env, human_fn).wrap(step, lambda new: new[0].actor_params, human_params_of,
+                                                         start=start, candidates=candidates, on_candidate=save)
 
 
 class FeedbackSetup:

@@ -45,3 +45,20 @@ def test_summarize_means_and_per_episode_lists():
 def test_mismatched_lengths_are_an_error():
     with pytest.raises(ValueError):
         metrics.episode_metrics(np.zeros(3), np.zeros((4, 8)), np.zeros(3))
+
+
+def test_counts_in_jax_give_the_numpy_metrics():
+    """The jitted evaluator counts with jax.numpy; the metrics must be the NumPy ones, number for number."""
+    import jax.numpy as jnp
+
+    rng = np.random.default_rng(0)
+    contact = (rng.random((3, 9)) < 0.3).astype(np.float32)
+    contact[2] = 0  # an episode without a touch: first_touch_step is the length
+    regions = (rng.random((3, 9, 8)) < 0.2).astype(np.float32)
+    speed = rng.random((3, 9)).astype(np.float32) * 2
+    counts = metrics.episode_counts(jnp.asarray(contact), jnp.asarray(regions), jnp.asarray(speed), 0.7, xp=jnp)
+    s = metrics.from_counts({k: np.asarray(v) for k, v in counts.items()}, 9)
+    assert s == metrics.summarize(contact, regions, speed, 0.7)
+    assert s["per_episode"] == {name: [metrics.episode_metrics(c, r, v, 0.7)[name] for c, r, v in
+                                       zip(contact, regions, speed)] for name in metrics.METRIC_NAMES}
+    assert s["region_touch_frequency"] == [float(f) for f in (regions > 0).reshape(-1, 8).mean(axis=0)]

@@ -52,16 +52,11 @@ def _session(toy_run: Path, feedback: str, seed: int):
 def _teacher_score(loaded, spec, actor_params) -> float:
     import jax
 
-    from mjx_protamer.agents.ddpg.evaluate import make_rollout
-    from mjx_protamer.experiments.evaluate import eval_seed
-    from mjx_protamer.human.teachers import env_signal_columns, rule_scores, rule_signals
+    from mjx_protamer.experiments.evaluate import eval_seed, make_evaluator, summarize
 
-    teacher = spec.config.feedback.teacher
-    rollout = make_rollout(loaded.env, loaded.pre.train.episode_length, loaded.pre.ddpg.actor_hidden)
-    sig = jax.device_get(rollout(actor_params, jax.random.split(jax.random.PRNGKey(eval_seed(loaded.pre)), 8)))
-    cols = env_signal_columns(teacher.signals, loaded.env)
-    return float(np.mean(rule_scores(teacher, rule_signals(cols, sig["obs"], sig["action"], sig["reward_terms"],
-                                                            sig["region_mask"]))))
+    evaluate = make_evaluator(loaded.pre, loaded.env, spec.config.feedback.teacher)
+    ev = evaluate(actor_params, jax.random.split(jax.random.PRNGKey(eval_seed(loaded.pre)), 8))
+    return summarize(jax.device_get(ev), loaded.pre.train.episode_length)["teacher_score"]
 
 
 def test_a_short_keyboard_session_moves_the_teacher_score_beyond_the_intervals(toy_run):

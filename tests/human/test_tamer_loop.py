@@ -137,7 +137,7 @@ def test_tamer_with_simulated_keyboard_teacher_moves_behaviour_its_way():
         sources = [teacher_for(learner, cfg, env, clock)] if use_model else []
         for _ in range(30):  # 3000 steps shown, 2 updates each (an unpaced session's)
             run_chunk(learner, clock, sources, extra=100)
-        rollout = make_rollout(env, 50, cfg.pretrain.ddpg.actor_hidden)
+        rollout = make_rollout(env, 50, cfg.pretrain.ddpg.actor_hidden, keep=("action",))
         out = rollout(learner.state.actor_params, jax.random.split(jax.random.PRNGKey(123), 16))
         vertical[use_model] = float(np.asarray(out["action"])[..., 1].mean())
         if use_model:

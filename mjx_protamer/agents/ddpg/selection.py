@@ -9,7 +9,8 @@ the learner's own objective, `alpha r_env + beta gain r_hat` (what its critic ma
 metrics and never the hidden teacher. The validation episodes have their own seed stream (`validation_seed`),
 apart from training's and the test episodes', and every candidate meets the same ones.
 
-Pure JAX: `validate` and `keep_better` vmap over seeds; the host decides when (`is_candidate`).
+Pure JAX: `validate` and `keep_better` vmap over seeds; the host decides when (`is_candidate`). Runs wire them
+in through one wrapper, `experiments/snapshot_selection.py`.
 """
 
 from __future__ import annotations
@@ -44,7 +45,8 @@ def make_validate(env, episode_length: int, actor_hidden, alpha: float, beta: fl
                   human_reward_fn: Callable | None = None):
     """validate(actor_params, human_params, keys (E, 2)) -> (mean return under the learner's objective,
     the validation episodes' per-step arm speed (E, T), for diagnostics)."""
-    rollout = make_rollout(env, episode_length, actor_hidden)
+    keep = ("reward", "arm_speed") + (("obs", "action") if human_reward_fn is not None else ())
+    rollout = make_rollout(env, episode_length, actor_hidden, keep=keep)
 
     def validate(actor_params, human_params, keys):
         sig = rollout(actor_params, keys)

@@ -23,13 +23,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mjx_protamer.agents.ddpg import selection
 from mjx_protamer.config import ConfigError, check_resume_config, to_dict
-from mjx_protamer.experiments import metrics as M
-from mjx_protamer.experiments.evaluate import validation_seed
 from mjx_protamer.experiments.feedback_train import human_reward, make_feedback_train
 from mjx_protamer.experiments.run_log import flatten
 from mjx_protamer.experiments.runner import run_chunks
+from mjx_protamer.experiments.snapshot_selection import SnapshotSelection
 from mjx_protamer.experiments.stats import pearson
 from mjx_protamer.experiments.table2.artifacts import write_table2
 from mjx_protamer.experiments.table2.config import Table2Config
@@ -99,12 +97,8 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     init_feedback = jax.jit(jax.vmap(ft.init))
     chunk_fn = jax.jit(jax.vmap(ft.chunk_fn, in_axes=(0, 0, None)), donate_argnums=(0, 1))
     # The tested snapshot (train.select_every_chunks > 0): validation episodes of each seed's own stream
-    validate = jax.jit(jax.vmap(selection.make_validate(
-        env, tc.episode_length, pre.ddpg.actor_hidden, pre.ddpg.reward_alpha, pre.ddpg.reward_beta,
-        human_reward(ft.apply)), in_axes=(0, {"params": 0, "gain": None}, 0)))
-    keep = jax.jit(jax.vmap(selection.keep_better, in_axes=(0, 0, 0, None)))
-    val_keys = jnp.stack([jax.random.split(jax.random.PRNGKey(validation_seed(dataclasses.replace(
-        pre, train=dataclasses.replace(tc, seed=int(s))))), tc.select_episodes) for s in cfg.seeds])
+    selecting = SnapshotSelection(pre, env, human_reward(ft.apply), seeds=cfg.seeds,
+                                  human_params_axes={"params": 0, "gain": None})
     untrained = init_feedback(seeds).rm_params
     evaluate_seeds = make_seed_evaluator(cfg, env, ft)  # traced once for every condition and actor
     reward_models: dict[str, object] = {}
@@ -125,19 +119,12 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
         fp = ft.params(kind, credit)
         fp = fp._replace(gain=fp.gain * cond.beta_scale)
 
-        chunks_run, validations = [0], []
+        def train_step(state):  # called within this iteration: fp is this condition's
+            ts, fs, m, _ = chunk_fn(*state, fp)
+            return (ts, fs), m, None
 
-        def step(state):  # called within this iteration: fp, cond and t0 are this condition's
-            ts, fs, m, _ = chunk_fn(*state[:2], fp)
-            kept = state[2]
-            chunks_run[0] += 1
-            if selection.is_candidate(chunks_run[0], tc.num_chunks, tc.select_every_chunks, tc.select_from):
-                score, speed = validate(ts.actor_params, {"params": fs.rm_params, "gain": fp.gain}, val_keys)
-                kept = keep(jax.vmap(selection.init)(ts.actor_params) if kept is None else kept, ts.actor_params, score,
-                            chunks_run[0])
-                validations.append({"chunk": chunks_run[0], "score": np.asarray(score).tolist(), "freeze_ratio":
-                                    np.mean(np.asarray(speed) < pre.env.freeze_speed, axis=(1, 2)).tolist()})
-            return (ts, fs, kept), m, None
+        step, validations = selecting.wrap(train_step, lambda new: new[0].actor_params,
+                                           lambda new, fp=fp: {"params": new[1].rm_params, "gain": fp.gain})
 
         def progress_fn(info):
             rows = [{"condition": cond.name, "seed": int(seed), "chunk": info.chunk,
@@ -238,47 +225,20 @@ def make_seed_evaluator(cfg: Table2Config, env, ft):
 
     One evaluator serves a whole run: its jitted rollout is traced once, then every condition's tested and
     last actors reuse it (the parameter shapes are the same)."""
-    from mjx_protamer.agents.ddpg.evaluate import make_rollout
-    from mjx_protamer.experiments.evaluate import eval_seed
-    from mjx_protamer.human.teachers import rule_scores
+    from mjx_protamer.experiments.evaluate import eval_seed, make_evaluator, summarize
 
     pre = cfg.pretrain
-    rollout = make_rollout(env, pre.train.episode_length, pre.ddpg.actor_hidden)
     episodes = pre.train.eval_episodes
     keys = jnp.stack([jax.random.split(jax.random.PRNGKey(eval_seed(dataclasses.replace(
         pre, train=dataclasses.replace(pre.train, seed=int(s))))), episodes) for s in cfg.seeds])
-    teacher = cfg.feedback.teacher
-
-    def run(actor_params, rm_params, untrained_params, keys):
-        sig = rollout(actor_params, keys)
-        score = jax.vmap(lambda o, a, t, r: rule_scores(teacher, ft.signals(o, a, t, r)))(
-            sig["obs"], sig["action"], sig["reward_terms"], sig["region_mask"])
-        r_hat = ft.apply(rm_params, sig["obs"], sig["action"])
-        r_hat0 = ft.apply(untrained_params, sig["obs"], sig["action"])
-        keep = ("reward", "self_contact", "region_mask", "arm_speed")
-        sample = {"obs": sig["obs"][:, ::STATE_STRIDE], "action": sig["action"][:, ::STATE_STRIDE],
-                  "score": score[:, ::STATE_STRIDE]}
-        sample = jax.tree.map(lambda x: x.reshape(-1, *x.shape[2:]), sample)  # (episodes * steps, ...)
-        return {k: sig[k] for k in keep}, score, r_hat, r_hat0, sample
-
-    run_seeds = jax.jit(jax.vmap(run))
+    run = make_evaluator(pre, env, cfg.feedback.teacher, ft.apply, state_stride=STATE_STRIDE)
+    run_seeds = jax.jit(jax.vmap(lambda actor, rm, untrained, k: run(actor, k, {"test": rm, "untrained": untrained})))
 
     def evaluate(actor_params, rm_params, untrained_params) -> tuple[list[dict], dict]:
-        sig, score, r_hat, r_hat0, sample = jax.device_get(run_seeds(actor_params, rm_params, untrained_params,
-                                                                     keys))
-        out = []
-        for i in range(len(cfg.seeds)):
-            ev = M.summarize(sig["self_contact"][i], sig["region_mask"][i], sig["arm_speed"][i],
-                             freeze_threshold=pre.env.freeze_speed)
-            returns = np.sum(sig["reward"][i], axis=1)
-            ev["episode_return"] = float(returns.mean())
-            ev["per_episode"]["episode_return"] = [float(r) for r in returns]
-            ev["teacher_score"] = float(score[i].mean())
-            ev["per_episode"]["teacher_score"] = [float(x) for x in score[i].mean(axis=1)]
-            ev["r_hat_corr_test"] = pearson(np.ravel(r_hat[i]), np.ravel(score[i]))
-            ev["r_hat_corr_untrained"] = pearson(np.ravel(r_hat0[i]), np.ravel(score[i]))
-            out.append(ev)
-        return out, sample
+        ev = jax.device_get(run_seeds(actor_params, rm_params, untrained_params, keys))
+        per_seed = [summarize(jax.tree.map(lambda x, i=i: x[i], ev), pre.train.episode_length)
+                    for i in range(len(cfg.seeds))]
+        return per_seed, ev["states"]
 
     return evaluate
 
