@@ -1,12 +1,14 @@
 """Table II on several processes (and hosts) with `jax.distributed`.
 
-Every process joins one `jax.distributed` job (process 0 runs its coordinator), trains a contiguous block of the
-seeds for every condition with the one-process code (`table2.train_table2`: the block's seeds vmapped in one
-program, on this process's devices) into its own directory `OUT/process_<k>`, and hands its per-seed results to
-process 0, which writes the same table2.json / table2.md / figures / training.csv into `OUT` as one process
-writes for all the seeds. A seed's results do not depend on the process that trains it nor on the other seeds
-of its block (each seed's keys come from the seed alone), so N processes give the per-seed results of one
-process running the same blocks.
+Every process joins one `jax.distributed` job (process 0 runs its coordinator), trains its share of the work
+(`work_split`: a group of the conditions on a block of the seeds) with the one-process code
+(`table2.train_table2`: the block's seeds vmapped in one program, on this process's devices) into its own
+directory `OUT/process_<k>`, and hands its per-seed results to process 0, which writes the same table2.json /
+table2.md / figures / training.csv into `OUT` as one process writes for the whole run. A seed's results do not
+depend on the process that trains it nor on the other conditions (each seed's keys come from the seed alone),
+so N processes give the per-seed results of one process running the same seed blocks. Where the conditions are
+split, the pooled reward-model score (which needs every condition's reward models) is computed by process 0
+from everyone's models, gathered after training (`table2.pool_shares`).
 
 The hand-off is a collective (`multihost_utils.process_allgather` of each process's results as JSON bytes), not
 files in a shared `OUT`: hosts of a cluster need not share a file system, the collective is also the barrier

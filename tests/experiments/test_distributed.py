@@ -172,7 +172,7 @@ def test_a_killed_process_stops_the_others_with_one_line(config, tmp_path):
         lines = Lines(proc)
         pids = [int(p) for p in lines.wait_for(r"^protamer launch: 2 process\(es\), coordinator 127\.0\.0\.1:\d+, "
                                                r"pids (\d+), (\d+)$", 60).groups()]
-        lines.wait_for(r"^\[1\] process 1/2: seeds \[2, 3\] into ", 120)  # joined, training
+        lines.wait_for(r"^\[1\] process 1/2: conditions \['DTK'\], seeds \[0, 1, 2, 3\] into ", 120)  # joined, training
         os.kill(pids[1], signal.SIGKILL)
         t_kill = time.monotonic()
         proc.wait(timeout=60)
