@@ -44,7 +44,7 @@ def register(subparsers) -> None:
                    help="continue the run in --out: conditions already finished there are kept, not retrained")
     t.add_argument("--quiet", action="store_true", help="no per-chunk progress lines")
     d = t.add_argument_group(
-        "several processes", "jax.distributed: each process trains a contiguous block of the seeds (every condition) "
+        "several processes", "jax.distributed: each process trains a share of the conditions and seeds (--split) "
         "into OUT/process_<k>; process 0 gathers the results and writes the table and figures into OUT. `protamer "
         "launch` sets these for local processes; --resume continues every process")
     d.add_argument("--distributed", action="store_true", help="join the job SLURM or Open MPI started (srun, mpirun): "
@@ -53,6 +53,11 @@ def register(subparsers) -> None:
                    "coordinator (with --processes and --process-id)")
     d.add_argument("--processes", default=None, metavar="N", help="how many processes the job has")
     d.add_argument("--process-id", default=None, metavar="K", help="this process's index, 0..N-1")
+    d.add_argument("--split", choices=("both", "seeds", "conditions"), default=None,
+                   help="how the processes share the work: both (default): the conditions in gcd(N, conditions) "
+                   "groups, the seeds in blocks for the rest (2 processes, 4 conditions: 2 conditions each, all "
+                   "seeds); seeds: every condition on a block of the seeds; conditions: a group of the conditions on "
+                   "all the seeds. A process with all the seeds gives bit for bit one process's results")
     d.add_argument("--join-timeout", default=300, metavar="S", help="seconds for every process to join, else each "
                    "stops with one line (default 300)")
     d.add_argument("--heartbeat-timeout", default=100, metavar="S", help="seconds after which a silent process "
@@ -159,6 +164,9 @@ def _processes(args: argparse.Namespace):
     explicit = {"--coordinator": args.coordinator, "--processes": args.processes, "--process-id": args.process_id}
     given = [k for k, v in explicit.items() if v is not None]
     if not given and not args.distributed:
+        if args.split is not None:
+            raise ConfigError("--split shares the work of several processes; give it with protamer launch, "
+                              "--distributed or --coordinator")
         return None
     if args.distributed and given:
         raise ConfigError(f"--distributed detects the job from SLURM or Open MPI; leave out {given[0]}, or leave "
@@ -189,7 +197,7 @@ def _table2_processes(args: argparse.Namespace, cfg, spec, own) -> int:
     try:
         with contextlib.redirect_stdout(sys.stderr) if args.quiet else contextlib.nullcontext():
             result = run_table2_processes(cfg, args.out, spec, progress=not args.quiet, resume=args.resume,
-                                          claim_kind=TABLE2, own=own)
+                                          claim_kind=TABLE2, own=own, split=args.split or "both")
     except OSError as e:  # a full disk, no permission: one line, and what --resume keeps
         raise write_failed(e, args.out, f"the conditions each process finished are kept in {args.out}/process_<k>",
                            "continue with the same command and --resume") from None

@@ -1,12 +1,14 @@
 """Table II on several processes (and hosts) with `jax.distributed`.
 
-Every process joins one `jax.distributed` job (process 0 runs its coordinator), trains a contiguous block of the
-seeds for every condition with the one-process code (`table2.train_table2`: the block's seeds vmapped in one
-program, on this process's devices) into its own directory `OUT/process_<k>`, and hands its per-seed results to
-process 0, which writes the same table2.json / table2.md / figures / training.csv into `OUT` as one process
-writes for all the seeds. A seed's results do not depend on the process that trains it nor on the other seeds
-of its block (each seed's keys come from the seed alone), so N processes give the per-seed results of one
-process running the same blocks.
+Every process joins one `jax.distributed` job (process 0 runs its coordinator), trains its share of the work
+(`work_split`: a group of the conditions on a block of the seeds) with the one-process code
+(`table2.train_table2`: the block's seeds vmapped in one program, on this process's devices) into its own
+directory `OUT/process_<k>`, and hands its per-seed results to process 0, which writes the same table2.json /
+table2.md / figures / training.csv into `OUT` as one process writes for the whole run. A seed's results do not
+depend on the process that trains it nor on the other conditions (each seed's keys come from the seed alone),
+so N processes give the per-seed results of one process running the same seed blocks. Where the conditions are
+split, the pooled reward-model score (which needs every condition's reward models) is computed by process 0
+from everyone's models, gathered after training (`table2.pool_shares`).
 
 The hand-off is a collective (`multihost_utils.process_allgather` of each process's results as JSON bytes), not
 files in a shared `OUT`: hosts of a cluster need not share a file system, the collective is also the barrier
@@ -36,6 +38,7 @@ from pathlib import Path
 
 from mjx_protamer.config import ConfigError
 from mjx_protamer.errors import DistributedError
+from mjx_protamer.experiments.work_split import split_work
 
 # The runtime's own join timeout is this much longer than ours, so the watchdog's one line comes first.
 JOIN_MARGIN_S = 10
@@ -60,23 +63,6 @@ class Processes:
                                                                           os.environ.get("OMPI_COMM_WORLD_RANK"))
         return f"process {index}" + (f" of {self.count}" if self.count is not None else "") if index is not None \
             else "this process"
-
-
-def seed_blocks(seeds, count: int) -> list[tuple[int, ...]]:
-    """`seeds` in `count` contiguous blocks, in order, the first `len(seeds) % count` one seed longer."""
-    seeds = tuple(seeds)
-    if count < 1:
-        raise ConfigError(f"the number of processes must be >= 1, got {count}")
-    if len(seeds) < count:
-        raise ConfigError(f"{count} processes need at least {count} seeds (each trains a block of them), the run "
-                          f"has {len(seeds)}: give more --seeds or fewer processes")
-    size, extra = divmod(len(seeds), count)
-    blocks, start = [], 0
-    for k in range(count):
-        end = start + size + (k < extra)
-        blocks.append(seeds[start:end])
-        start = end
-    return blocks
 
 
 _joined = False
@@ -164,18 +150,23 @@ def broadcast_ok(ok: bool, what: str) -> bool:
 
 
 def gather_json(obj) -> list:
-    """Every process's JSON-able `obj`, in process order (on every process). The bytes are padded to a power of
-    two so that runs of similar size reuse the compiled gather."""
+    """Every process's JSON-able `obj`, in process order (on every process)."""
+    return [json.loads(b) for b in gather_bytes(json.dumps(obj).encode())]
+
+
+def gather_bytes(blob: bytes) -> list[bytes]:
+    """Every process's `blob`, in process order (on every process). The bytes are padded to a power of two so
+    that runs of similar size reuse the compiled gather."""
     import numpy as np
     from jax.experimental import multihost_utils
 
-    data = np.frombuffer(json.dumps(obj).encode(), np.uint8)
+    data = np.frombuffer(blob, np.uint8)
     sizes = np.asarray(_collective(lambda: multihost_utils.process_allgather(np.int32(data.size)),
                                    "the hand-off of the results")).reshape(-1)
     padded = np.zeros(1 << max(10, int(sizes.max() - 1).bit_length()), np.uint8)
     padded[:data.size] = data
     every = np.asarray(_collective(lambda: multihost_utils.process_allgather(padded), "the hand-off of the results"))
-    return [json.loads(bytes(every[k, :int(sizes[k])])) for k in range(len(sizes))]
+    return [bytes(every[k, :int(sizes[k])]) for k in range(len(sizes))]
 
 
 @contextlib.contextmanager
@@ -206,26 +197,32 @@ def process_dir(out: Path, index: int) -> Path:
 
 
 def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resume: bool = False,
-                         claim_kind: str = "table2", own: tuple[str, ...] = ()) -> dict | None:
+                         claim_kind: str = "table2", own: tuple[str, ...] = (), split: str = "both") -> dict | None:
     """This process's part of a table2 run on `spec`'s job: join, claim `out` (process 0) and `out/process_<k>`,
-    train the block of seeds, hand the results to process 0. Process 0 returns `write_table2`'s result for all the
-    seeds (written into `out`), the others None. Raises ConfigError / OutputDirError / DistributedError with
-    one line."""
+    train its share of the conditions and seeds (`work_split.split_work`), hand the results to process 0.
+    Process 0 returns `write_table2`'s result for the whole run (written into `out`), the others None. Raises
+    ConfigError / OutputDirError / DistributedError with one line."""
     from mjx_protamer.errors import OutputDirError
     from mjx_protamer.experiments import table2 as T2
+    from mjx_protamer.experiments.table2 import pool_shares
     from mjx_protamer.outdir import claimed
 
     t_all = time.perf_counter()
     out = Path(out)
     index, count = join(spec)
-    blocks = seed_blocks(cfg.seeds, count)
-    block = blocks[index]
-    layout = {"count": count, "seed_blocks": [list(b) for b in blocks]}
+    names = [c.name for c in cfg.conditions]
+    shares = split_work(names, cfg.seeds, count, split)
+    share = shares[index]
+    layout = {"count": count, "split": split, "condition_groups": [list(s.conditions) for s in shares],
+              "seed_blocks": [list(s.seeds) for s in shares]}
+    # The pooled reward-model score of a seed needs every condition's reward models and test states: where a
+    # process trains only some conditions, process 0 computes it from everyone's (gathered after training)
+    pool_at_0 = any(len(s.conditions) < len(names) for s in shares)
     with contextlib.ExitStack() as stack:
         if index == 0:  # the run's directory first; the others make theirs in it only after that
             try:
                 stack.enter_context(claimed(out, claim_kind, resume=resume, own=own))
-                _check_layout(out / "processes.json", layout, resume)
+                _check_layout(out / "processes.json", layout, resume, names)
             except (ConfigError, OutputDirError):
                 broadcast_ok(False, "telling the others that --out was refused")
                 raise
@@ -234,42 +231,56 @@ def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resum
             raise OutputDirError(f"process {index}: process 0 refused --out {out} (its line says why)")
         mine = process_dir(out, index)
         if progress:
-            print(f"process {index}/{count}: seeds {list(block)} into {mine}", flush=True)
+            print(f"process {index}/{count}: conditions {list(share.conditions)}, seeds {list(share.seeds)} into "
+                  f"{mine}", flush=True)
+        kept = {}
+
+        def keep_for_process_0(ft, reward_models, untrained, test_states):
+            kept.update(ft=ft, blob=pool_shares.pack_models(reward_models, test_states))
+            return {}
+
+        mine_cfg = dataclasses.replace(cfg, seeds=share.seeds,
+                                       conditions=tuple(c for c in cfg.conditions if c.name in share.conditions))
         with claimed(mine, claim_kind, resume=resume, own=own), alone():
-            # a process whose directory holds no run yet (it had not started) starts its block now
-            trained = T2.train_table2(dataclasses.replace(cfg, seeds=block), mine, progress,
-                                      resume and (mine / "config.yaml").is_file())
-        _collective(lambda: _barrier("protamer/table2/trained", TRAINED_BARRIER_S), "waiting for the other blocks")
+            # a process whose directory holds no run yet (it had not started) starts its share now
+            trained = T2.train_table2(mine_cfg, mine, progress, resume and (mine / "config.yaml").is_file(),
+                                      pooled=keep_for_process_0 if pool_at_0 else None)
+        _collective(lambda: _barrier("protamer/table2/trained", TRAINED_BARRIER_S), "waiting for the other shares")
         parts = [T2.Trained(**p) for p in gather_json(dataclasses.asdict(trained))]
+        blobs = gather_bytes(kept["blob"]) if pool_at_0 else None
         if index != 0:
             if progress:
-                print(f"process {index}/{count}: seeds {list(block)} handed to process 0", flush=True)
+                print(f"process {index}/{count}: its share handed to process 0", flush=True)
             return None
-        return _write_merged(cfg, out, parts, layout, time.perf_counter() - t_all)
+        merged = _merge(parts, cfg)
+        if pool_at_0:
+            with alone():
+                pool_shares.pool_shares(cfg, kept["ft"], shares, blobs, merged.evals)
+        return _write_merged(cfg, out, merged, parts, layout, time.perf_counter() - t_all)
 
 
-def _write_merged(cfg, out: Path, parts: list, layout: dict, total_s: float) -> dict:
-    """Process 0: what one process writes for all the seeds, from every process's part; processes.json and
-    table2.json's `processes` say which process trained which seeds and for how long."""
+def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: float) -> dict:
+    """Process 0: what one process writes for the whole run, from every process's part; processes.json and
+    table2.json's `processes` say which process trained which conditions and seeds, and for how long."""
     import yaml
 
     from mjx_protamer.config import to_dict
     from mjx_protamer.atomic import write_atomic
     from mjx_protamer.experiments.table2 import write_table2
 
-    merged = _merge(parts, cfg)
     write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
     for name, per_seed in merged.evals.items():
         for seed, ev in per_seed.items():
             write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(ev, indent=2))
     extra = {"processes": {**layout, "dirs": [process_dir(out, k).name for k in range(layout["count"])],
-                           "train_wall_s": {c.name: [sum(p.wall[c.name]) for p in parts] for c in cfg.conditions}}}
+                           "train_wall_s": {c.name: [sum(p.wall[c.name]) if c.name in p.wall else None
+                                                     for p in parts] for c in cfg.conditions}}}
     return write_table2(cfg, out, merged, total_s, extra)
 
 
-def _check_layout(path: Path, layout: dict, resume: bool) -> None:
-    """processes.json says how the seeds were split; a resumed run must split them the same way (and a run of
-    one process is continued by one process)."""
+def _check_layout(path: Path, layout: dict, resume: bool, names: list[str]) -> None:
+    """processes.json says how the work was split; a resumed run must split it the same way (and a run of one
+    process is continued by one process)."""
     from mjx_protamer.atomic import write_atomic
 
     if resume and not path.is_file() and any(path.parent.glob("condition_*.json")):
@@ -277,18 +288,23 @@ def _check_layout(path: Path, layout: dict, resume: bool) -> None:
                           "protamer launch, --distributed or --coordinator)")
     if resume and path.is_file():
         before = json.loads(path.read_text())
+        # a run from before --split split the seeds only
+        before = {"count": before["count"], "split": before.get("split", "seeds"),
+                  "condition_groups": before.get("condition_groups", [names] * before["count"]),
+                  "seed_blocks": before["seed_blocks"]}
         if before != layout:
-            raise ConfigError(f"--resume: {path.parent} was run on {before['count']} process(es) with seed blocks "
-                              f"{before['seed_blocks']}; continue it with the same --processes and --seeds")
+            raise ConfigError(f"--resume: {path.parent} was run on {before['count']} process(es) with --split "
+                              f"{before['split']} (conditions {before['condition_groups']}, seeds "
+                              f"{before['seed_blocks']}); continue it with the same --processes, --split and --seeds")
     write_atomic(path, json.dumps(layout))
 
 
 def _merge(parts: list, cfg):
     """One `Trained` of every process's part (JSON turned the seeds into strings), the seeds in order; a
-    condition's training seconds are the slowest process's (they ran side by side)."""
+    condition's training seconds are the slowest of the processes that trained it (they ran side by side)."""
     from mjx_protamer.experiments.table2 import Trained
 
-    evals = {c.name: {int(s): ev for p in parts for s, ev in p.evals[c.name].items()} for c in cfg.conditions}
+    evals = {c.name: {int(s): ev for p in parts for s, ev in p.evals.get(c.name, {}).items()} for c in cfg.conditions}
     missing = [s for s in cfg.seeds if any(s not in evals[c.name] for c in cfg.conditions)]
     if missing:
         raise DistributedError(f"the processes handed back no results for seeds {missing}")
@@ -296,5 +312,6 @@ def _merge(parts: list, cfg):
     seed_order = {s: i for i, s in enumerate(cfg.seeds)}  # one process's row order: condition, chunk, seed
     training = sorted((r for p in parts for r in p.training),
                       key=lambda r: (order[r["condition"]], r["chunk"], seed_order[r["seed"]]))
-    wall = {c.name: [max(sum(p.wall[c.name]) for p in parts)] for c in cfg.conditions}
+    evals = {c.name: {s: evals[c.name][s] for s in cfg.seeds} for c in cfg.conditions}
+    wall = {c.name: [max(sum(p.wall[c.name]) for p in parts if c.name in p.wall)] for c in cfg.conditions}
     return Trained(training, evals, wall)

@@ -1,6 +1,7 @@
-"""`reproduce table2` on several processes (jax.distributed) and `protamer launch`: the seeds split in blocks give
-the per-seed results of one process running the same blocks; a dead or absent process is reported in one line
-within the stated timeout; bad input is refused in one line. The tiny toy config and 2-seed blocks are
+"""`reproduce table2` on several processes (jax.distributed) and `protamer launch`: the conditions split in groups
+give bit for bit the per-seed results of one process running the whole command, the seeds split in blocks those
+of one process running the same blocks; a dead or absent process is reported in one line within the stated
+timeout; bad input is refused in one line. The tiny toy config and 2-seed blocks are
 test_table2.py's shapes, so the persistent compile cache serves both."""
 
 import json
@@ -17,7 +18,7 @@ import pytest
 import yaml
 
 from mjx_protamer.cli import main
-from mjx_protamer.experiments.distributed import seed_blocks
+from mjx_protamer.experiments.work_split import Share, seed_blocks, split_work
 
 from toy_feedback import toy_feedback_config
 
@@ -74,6 +75,25 @@ def test_seed_blocks_are_contiguous_and_cover_every_seed():
         seed_blocks(range(2), 3)
 
 
+def test_split_work_gives_each_process_one_rectangle_of_conditions_and_seeds():
+    c4 = ("DDPG", "DTK", "DTW", "DTP")
+    # both: conditions first, gcd(processes, conditions) groups; the seeds in blocks for the rest
+    assert split_work(c4, range(5), 2) == [Share(("DDPG", "DTK"), (0, 1, 2, 3, 4)), Share(("DTW", "DTP"), (0, 1, 2, 3, 4))]
+    assert split_work(c4, range(4), 8) == [Share((c,), b) for c in c4 for b in ((0, 1), (2, 3))]
+    assert split_work(c4, range(3), 3) == [Share(c4, (k,)) for k in range(3)]
+    assert split_work(c4, range(3), 1) == [Share(c4, (0, 1, 2))]
+    assert split_work(c4, range(4), 2, "seeds") == [Share(c4, (0, 1)), Share(c4, (2, 3))]
+    assert split_work(c4, range(2), 3, "conditions") == [Share(("DDPG", "DTK"), (0, 1)), Share(("DTW",), (0, 1)),
+                                                         Share(("DTP",), (0, 1))]
+    with pytest.raises(ValueError, match="--split conditions: 5 processes need at least 5 conditions"):
+        split_work(c4, range(8), 5, "conditions")
+    with pytest.raises(ValueError, match="--split both: 3 processes on 4 conditions train 3 blocks of seeds, the run "
+                                         "has 2 seed"):
+        split_work(c4, range(2), 3)
+    with pytest.raises(ValueError, match="--split must be one of both, seeds, conditions"):
+        split_work(c4, range(2), 2, "rows")
+
+
 @pytest.mark.parametrize("argv, says", [
     (["launch", "--processes", "0", "--", "reproduce", "table2"], "--processes must be a whole number within 1..1024"),
     (["launch", "--processes", "2", "--port", "70000", "--", "reproduce", "table2"], "--port must be a whole number "
@@ -95,6 +115,7 @@ def test_seed_blocks_are_contiguous_and_cover_every_seed():
     (["reproduce", "table2", "--coordinator", "h:1", "--processes", "1", "--process-id", "0"], "--out is needed"),
     (["reproduce", "table2", "--distributed", "--processes", "2", "--out", "x"], "leave out --processes"),
     (["reproduce", "table2", "--distributed", "--join-timeout", "0", "--out", "x"], "--join-timeout must be"),
+    (["reproduce", "table2", "--split", "seeds", "--out", "x"], "--split shares the work of several processes"),
 ])
 def test_bad_input_is_one_line(argv, says, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # nothing is written anywhere
@@ -151,7 +172,7 @@ def test_a_killed_process_stops_the_others_with_one_line(config, tmp_path):
         lines = Lines(proc)
         pids = [int(p) for p in lines.wait_for(r"^protamer launch: 2 process\(es\), coordinator 127\.0\.0\.1:\d+, "
                                                r"pids (\d+), (\d+)$", 60).groups()]
-        lines.wait_for(r"^\[1\] process 1/2: seeds \[2, 3\] into ", 120)  # joined, training
+        lines.wait_for(r"^\[1\] process 1/2: conditions \['DTK'\], seeds \[0, 1, 2, 3\] into ", 120)  # joined, training
         os.kill(pids[1], signal.SIGKILL)
         t_kill = time.monotonic()
         proc.wait(timeout=60)
@@ -192,10 +213,34 @@ def _rows(out: Path) -> dict:
         return {(r["condition"], int(r["seed"]), int(r["chunk"])): r for r in csv.DictReader(f)}
 
 
-def test_two_processes_give_the_results_of_one_process_running_the_same_blocks(config, tmp_path):
-    multi = tmp_path / "multi"
+def test_two_processes_splitting_the_conditions_give_the_results_of_one_process(config, tmp_path):
+    """The default split of 2 processes and 2 conditions: each process trains one condition on all 4 seeds (the
+    one-process program), and process 0 pools the reward models of both: bit for bit one process's run."""
+    multi, one = tmp_path / "multi", tmp_path / "one"
     printed = _run_launch("--processes", 2, "--", "reproduce", "table2", "--config", config, "--seeds", 4,
                           "--out", multi, "--quiet")
+    assert "[0] | Contact rate ↑ |" in printed
+    assert main(["reproduce", "table2", "--config", str(config), "--seeds", "4", "--out", str(one), "--quiet"]) == 0
+    assert json.loads((multi / "processes.json").read_text()) == {
+        "count": 2, "split": "both", "condition_groups": [["DDPG"], ["DTK"]], "seed_blocks": [[0, 1, 2, 3]] * 2}
+    for k, cond in enumerate(("DDPG", "DTK")):
+        assert [p.name for p in sorted((multi / f"process_{k}").glob("condition_*.json"))] == [f"condition_{cond}.json"]
+        for seed in range(4):
+            ev = _per_seed(multi, cond, seed)
+            assert ev == _per_seed(one, cond, seed), (cond, seed)
+            assert "r_hat_corr_pooled" in ev  # pooled over both conditions, by process 0
+    assert _rows(multi) == _rows(one)
+    summary, ref = (json.loads((d / "table2.json").read_text()) for d in (multi, one))
+    for cond in ("DDPG", "DTK"):
+        assert {k: v for k, v in summary["conditions"][cond].items() if k != "train_wall_s"} == \
+            {k: v for k, v in ref["conditions"][cond].items() if k != "train_wall_s"}, cond
+    assert summary["processes"]["train_wall_s"]["DTK"][0] is None  # process 0 did not train DTK
+
+
+def test_two_processes_splitting_the_seeds_give_the_results_of_one_process_running_the_same_blocks(config, tmp_path):
+    multi = tmp_path / "multi"
+    printed = _run_launch("--processes", 2, "--", "reproduce", "table2", "--config", config, "--seeds", 4,
+                          "--split", "seeds", "--out", multi, "--quiet")
     assert "[0] | Contact rate ↑ |" in printed and f"[0] table_json    {multi / 'table2.json'}" in printed
     # one process, the same program layout: 2 seeds vmapped per program
     one = {0: tmp_path / "one_a", 2: tmp_path / "one_b"}
@@ -205,7 +250,8 @@ def test_two_processes_give_the_results_of_one_process_running_the_same_blocks(c
     summary = json.loads((multi / "table2.json").read_text())
     assert summary["seeds"] == [0, 1, 2, 3]
     assert summary["processes"]["seed_blocks"] == [[0, 1], [2, 3]]
-    assert json.loads((multi / "processes.json").read_text()) == {"count": 2, "seed_blocks": [[0, 1], [2, 3]]}
+    assert json.loads((multi / "processes.json").read_text()) == {
+        "count": 2, "split": "seeds", "condition_groups": [["DDPG", "DTK"]] * 2, "seed_blocks": [[0, 1], [2, 3]]}
     rows = _rows(multi)
     for first, out in one.items():
         ref_summary, ref_rows = json.loads((out / "table2.json").read_text()), _rows(out)
@@ -233,12 +279,13 @@ def test_a_run_of_several_processes_is_not_resumed_by_one(config, tmp_path, caps
 
 @pytest.mark.slow
 def test_resume_continues_every_process_to_the_same_table(config, tmp_path):
-    """A run stopped after process 0 finished both conditions and process 1 only DDPG: --resume keeps what
-    finished (process 0 trains nothing) and ends with the table of an uninterrupted run."""
+    """A run (conditions split: process 0 DDPG, process 1 DTK) stopped before process 1 finished: --resume keeps
+    what finished (process 0 trains nothing) and ends with the table of an uninterrupted run; another split is
+    refused."""
     out = tmp_path / "o"
     _run_launch("--processes", 2, "--", "reproduce", "table2", "--config", config, "--seeds", 4, "--out", out, "--quiet")
     first = json.loads((out / "table2.json").read_text())
-    kept = (out / "process_1" / "condition_DDPG.json").read_bytes()
+    kept = (out / "process_0" / "condition_DDPG.json").read_bytes()
     for path in (out / "process_1" / "condition_DTK.json", out / "table2.json"):
         path.unlink()
     r = subprocess.run(_protamer("launch", "--processes", 2, "--", "reproduce", "table2", "--config", config,
@@ -247,18 +294,21 @@ def test_resume_continues_every_process_to_the_same_table(config, tmp_path):
     assert r.returncode == 1 and "is not empty" in r.stdout + r.stderr  # not without --resume
     printed = _run_launch("--processes", 2, "--", "reproduce", "table2", "--config", config, "--seeds", 4,
                           "--out", out, "--resume")
-    assert "[0] [DDPG] kept from" in printed and "[0] [DTK] kept from" in printed
-    assert "[1] [DDPG] kept from" in printed and "[1] [DTK, 2 seeds] chunk 3/3" in printed
-    assert (out / "process_1" / "condition_DDPG.json").read_bytes() == kept
+    assert "[0] [DDPG] kept from" in printed and "[1] [DTK, 4 seeds] chunk 3/3" in printed
+    assert (out / "process_0" / "condition_DDPG.json").read_bytes() == kept
     again = json.loads((out / "table2.json").read_text())
     for cond in ("DDPG", "DTK"):
         for metric in ("unique_regions", "freeze_ratio", "teacher_score", "r_hat_corr_pooled"):
             assert again["conditions"][cond][metric]["seed_values"] == first["conditions"][cond][metric]["seed_values"]
-    # the seeds split differently: refused before anything is trained
-    r = subprocess.run(_protamer("launch", "--processes", 1, "--", "reproduce", "table2", "--config", config,
-                                 "--seeds", 4, "--out", out, "--resume"), capture_output=True, text=True, cwd=ROOT,
-                       timeout=300)
-    assert r.returncode == 1 and "continue it with the same --processes and --seeds" in r.stdout
+    # the work split differently: refused in one line before anything is trained
+    for differently in (["--processes", 1], ["--processes", 2, "--split", "seeds"]):
+        r = subprocess.run(_protamer("launch", *differently[:2], "--", "reproduce", "table2", "--config", config,
+                                     "--seeds", 4, "--out", out, "--resume", *differently[2:]), capture_output=True,
+                           text=True, cwd=ROOT, timeout=300)
+        assert r.returncode == 1 and "continue it with the same --processes, --split and --seeds" in r.stdout, \
+            r.stdout[-2000:]
+        assert [x for x in r.stdout.splitlines() if "configuration error" in x][0].endswith(
+            "continue it with the same --processes, --split and --seeds")
     # a run of one process is continued by one process
     single = tmp_path / "single"
     single.mkdir()

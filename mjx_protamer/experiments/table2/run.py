@@ -55,10 +55,11 @@ class Trained:
     wall: dict[str, list[float]]
 
 
-def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False) -> Trained:
+def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False, pooled=None) -> Trained:
     """Train and test every condition on `cfg.seeds` (vmapped in one program), writing each condition's results
-    and agents into `out_dir` as it finishes; the pooled reward-model score at the end. No table or figures:
-    `write_table2` makes them."""
+    and agents into `out_dir` as it finishes; the pooled reward-model score at the end (`pooled`: what computes
+    it, `pooled_corr`'s signature; a run whose conditions are split across processes pools them elsewhere). No
+    table or figures: `write_table2` makes them."""
     from mjx_protamer.atomic import write_atomic
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
 
@@ -167,8 +168,7 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
         write_atomic(done[cond.name], json.dumps({
             "training": [r for r in training if r["condition"] == cond.name], "train_wall_s": train_s,
             "evals": {str(k): v for k, v in evals[cond.name].items()}}))
-    pooled = pooled_corr(ft, reward_models, untrained, test_states)
-    for name, per_seed in pooled.items():
+    for name, per_seed in (pooled or pooled_corr)(ft, reward_models, untrained, test_states).items():
         for i, seed in enumerate(cfg.seeds):
             evals[name][seed].update(per_seed[i])
             write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(evals[name][seed], indent=2))
