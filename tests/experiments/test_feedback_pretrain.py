@@ -130,7 +130,7 @@ def test_feedback_without_a_feedback_section_runs_the_shipped_feedback_kind_yaml
     from mjx_protamer.config import shipped_config
     from mjx_protamer.human.feedback_config import load_feedback_config
 
-    setup = _feedback_setup(f"simulated:{kind}", {}, ["feedback.credit.decay=0.8"])
+    setup, _ = _feedback_setup(f"simulated:{kind}", None, None, [], ["feedback.credit.decay=0.8"])
     shipped = load_feedback_config(shipped_config(f"feedback_{kind}.yaml"), ["feedback.credit.decay=0.8"]).feedback
     assert setup.kind == kind and setup.config == shipped and setup.config.teacher.channel.kind == kind
     assert (setup.config.credit.silence_weight, setup.config.reward_model.bounded) == (0.03, True)
