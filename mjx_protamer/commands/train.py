@@ -125,8 +125,8 @@ def _feedback_setup(spec: str, feedback_config: Path | None, pretrain_config: Pa
     """(FeedbackSetup, PretrainConfig) of `--feedback simulated:KIND`, from one run config (FeedbackRunConfig,
     loaded and validated whole): --feedback-config, its feedback section the channel's shipped one
     (configs/feedback_KIND.yaml) when it has none, its pretrain section --config's when given (else the built-in
-    default when it has none), `--set` on top (pretraining keys as they are, the other sections' by name), and the
-    channel of the flag."""
+    default when it has none), `--set` on top (pretraining keys with or without `pretrain.`, the other sections'
+    by name), and the channel of the flag."""
     import dataclasses
 
     from mjx_protamer.agents.ddpg.config import PretrainConfig
@@ -145,7 +145,9 @@ def _feedback_setup(spec: str, feedback_config: Path | None, pretrain_config: Pa
         raw["pretrain"] = read_raw(pretrain_config)
     elif "pretrain" not in raw:
         raw["pretrain"] = to_dict(PretrainConfig())  # overrides apply on top of the whole default, as without one
-    run = from_dict(FeedbackRunConfig, apply_overrides(raw, [f"pretrain.{o}" for o in overrides] + run_overrides))
+    # a pretraining key is named in errors as the run's (`pretrain.train.num_envs`), and may be set so too
+    overrides = [o if o.startswith("pretrain.") else f"pretrain.{o}" for o in overrides]
+    run = from_dict(FeedbackRunConfig, apply_overrides(raw, overrides + run_overrides))
     file_kind = run.feedback.teacher.channel.kind
     fb = dataclasses.replace(run.feedback, teacher=with_channel(run.feedback.teacher, kind))
     if own_feedback and file_kind != kind:
