@@ -104,12 +104,9 @@ def test_resume_with_feedback_is_exact(keyboard_run):
     args = ["pretrain", "--config", str(pre), "--feedback", "simulated:keyboard", "--feedback-config", str(fb),
             "--out", str(out), "--no-progress"]
     from mjx_protamer.commands.train import _feedback_setup
-    from mjx_protamer.config import load_config
-    from mjx_protamer.agents.ddpg.config import PretrainConfig
     from mjx_protamer.experiments.pretrain import run_pretrain
 
-    config = load_config(PretrainConfig, pre)
-    setup = _feedback_setup("simulated:keyboard", {"feedback": FEEDBACK}, [])
+    setup, config = _feedback_setup("simulated:keyboard", fb, pre, [], [])
     run_pretrain(config, out, progress=False, max_chunks=3, feedback=setup)  # "killed" after chunk 3 (ckpt 2)
     assert main(args + ["--resume"]) == 0
     a, b = csv_rows(full / "metrics.csv"), csv_rows(out / "metrics.csv")
