@@ -281,7 +281,8 @@ class FeedbackSetup:
     """What `run_pretrain(feedback=...)` needs: the simulated channel, the feedback config, the batch sizing."""
 
     def __init__(self, kind: str, config, batched=None):
-        from mjx_protamer.experiments.feedback_train import KINDS, BatchedFeedbackConfig
+        from mjx_protamer.experiments.feedback_train import KINDS
+        from mjx_protamer.human.feedback_config import BatchedFeedbackConfig
 
         if kind not in KINDS:
             raise ConfigError(f"feedback kind {kind!r} is not one of {', '.join(KINDS)}")
