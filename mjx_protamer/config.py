@@ -20,7 +20,7 @@ import re
 import types
 import typing
 from pathlib import Path
-from typing import Any, Literal, TypeVar, get_args, get_origin
+from typing import Any, Callable, Literal, TypeVar, get_args, get_origin
 
 import yaml
 
@@ -188,7 +188,9 @@ def apply_overrides(raw: dict[str, Any], overrides: list[str]) -> dict[str, Any]
         parts = key.strip().split(".")
         node = raw
         for p in parts[:-1]:
-            node = node.setdefault(p, {})
+            if node.get(p) is None:  # absent, or an empty section (`pretrain:` and nothing under it)
+                node[p] = {}
+            node = node[p]
             if not isinstance(node, dict):
                 raise ConfigError(f"override {item!r}: '{p}' is not a section")
         node[parts[-1]] = _parse_scalar(text)
@@ -270,9 +272,24 @@ def shipped_config(name: str) -> Path:
     return Path(str(resources.files("mjx_protamer") / "configs" / name))
 
 
-def check_resume_config(saved: Path, config: Any) -> None:
-    """`--resume` continues a run only with the config it started with: refuse when the config saved in `saved`
-    (`to_dict` as YAML) differs from `config`. Compared as parsed values, not text, so a saved file whose
-    formatting changed still continues."""
-    if read_raw(saved) != to_dict(config):
-        raise ConfigError(f"--resume: the config differs from the one saved in {saved}")
+def check_resume_config(saved: Path, config: Any, read: Callable[[Path], Any] | None = None) -> None:
+    """`--resume` continues a run only with the config it started with: refuse, naming the fields, when the config
+    saved in `saved` differs from `config`. Compared as typed values, what the loader makes of the file (`read`, by
+    default `load_config(type(config), saved)`): a saved file whose formatting changed, or that was written before
+    a knob existed (its default keeps what the run did) or a section joined the schema, still continues."""
+    try:
+        before = read(saved) if read is not None else load_config(type(config), saved)
+    except ConfigError as e:
+        raise ConfigError(f"--resume: the config saved in {saved} no longer loads: {e}") from None
+    if before != config:
+        changed = _differing(to_dict(before), to_dict(config))
+        raise ConfigError(f"--resume: the config differs from the one saved in {saved} in "
+                          f"{', '.join(changed[:5])}{' and more' if len(changed) > 5 else ''}")
+
+
+def _differing(a: Any, b: Any, prefix: str = "") -> list[str]:
+    """The dotted paths where two `to_dict` trees differ."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [p for k in sorted(a.keys() | b.keys())
+                for p in _differing(a.get(k), b.get(k), f"{prefix}{k}.")] if a != b else []
+    return [prefix.rstrip(".") or "the whole config"] if a != b else []

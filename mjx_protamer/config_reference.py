@@ -43,7 +43,16 @@ def schemas() -> list[tuple[str, type, tuple[str, ...], str]]:
 
 
 def field_comments(cls: type) -> dict[str, str]:
-    """Each field's comment: the comment lines right above it and those on its own lines, joined."""
+    """Each field's comment: the comment lines right above it and those on its own lines, joined; an inherited
+    field's where its class declares it."""
+    out: dict[str, str] = {}
+    for base in reversed(cls.__mro__):
+        if dataclasses.is_dataclass(base) and "__dataclass_fields__" in vars(base):
+            out.update(_own_field_comments(base))
+    return out
+
+
+def _own_field_comments(cls: type) -> dict[str, str]:
     src = textwrap.dedent(inspect.getsource(cls))
     comments: dict[int, tuple[str, bool]] = {}  # line -> (text, whole line)
     for tok in tokenize.generate_tokens(io.StringIO(src).readline):

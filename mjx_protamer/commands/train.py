@@ -32,9 +32,10 @@ def register(subparsers) -> None:
                    help="DeepTAMER with a simulated teacher per env, inside the jitted chunk: simulated:keyboard, "
                    "simulated:prosody or simulated:speech (writes feedback.jsonl and reward_model/ too)")
     p.add_argument("--feedback-config", type=Path, default=None,
-                   help="configs/feedback_*.yaml: its `feedback` section (teacher rule, channel, credit, reward "
-                   "model) and optional `batched` section; its `pretrain` section is used only without --config. "
-                   "--set feedback.X=... / batched.X=... override it")
+                   help="configs/feedback_*.yaml, a run config: its `feedback` section (teacher rule, channel, "
+                   "credit, reward model; default: configs/feedback_KIND.yaml's) and `batched` section; its "
+                   "`pretrain` section is used only without --config; `session` and `coach` (a live session's) are "
+                   "checked, unused. --set feedback.X=... / batched.X=... override it")
     p.set_defaults(handler=_pretrain)
 
     e = subparsers.add_parser(
@@ -70,36 +71,30 @@ def _enable_compile_cache() -> None:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
+# `--set` keys of a run's other sections (mjx_protamer/human/feedback_config.py FeedbackRunConfig); the rest are
+# the PretrainConfig's. Pretraining uses feedback and batched; session and coach are validated, unused.
+RUN_SECTIONS = ("feedback", "batched", "session", "coach")
+
+
 def _pretrain(args: argparse.Namespace) -> int:
     from mjx_protamer.agents.ddpg.config import PretrainConfig
-    from mjx_protamer.config import ConfigError, apply_overrides, from_dict, load_config, read_raw, to_dict
+    from mjx_protamer.config import ConfigError, apply_overrides, from_dict, load_config, to_dict
 
     if args.resume and args.out is None:
         raise ConfigError("--resume needs --out, the run directory to continue")
     if args.backend is not None:
         args.overrides = list(args.overrides) + [f"env.backend={args.backend}"]
-    fb_overrides = [o for o in args.overrides if o.split("=", 1)[0].split(".")[0] in ("feedback", "batched")]
-    overrides = [o for o in args.overrides if o not in fb_overrides]
-    if args.feedback is None and (args.feedback_config is not None or fb_overrides):
-        raise ConfigError("--feedback-config and --set feedback.*/batched.* need --feedback simulated:KIND")
-    fb_raw: dict = {}
-    if args.feedback_config is not None:
-        fb_raw = read_raw(args.feedback_config)
-        # `session` and `coach` are a live session's sections (protamer finetune): batched pretraining has no
-        # use for them
-        unknown = sorted(set(fb_raw) - {"pretrain", "feedback", "batched", "session", "coach"})
-        if unknown:
-            raise ConfigError(f"{args.feedback_config}: unknown key(s) {', '.join(unknown)}; "
-                              "allowed keys: pretrain, feedback, batched, session, coach")
-    if args.config is None and "pretrain" in fb_raw:
-        config = from_dict(PretrainConfig, apply_overrides(_section(fb_raw, "pretrain"), overrides), "pretrain")
+    run_overrides = [o for o in args.overrides if o.split("=", 1)[0].split(".")[0].strip() in RUN_SECTIONS]
+    overrides = [o for o in args.overrides if o not in run_overrides]
+    if args.feedback is None and (args.feedback_config is not None or run_overrides):
+        raise ConfigError(f"--feedback-config and --set {'.*/'.join(RUN_SECTIONS)}.* need --feedback simulated:KIND")
+    feedback = None
+    if args.feedback is not None:
+        feedback, config = _feedback_setup(args.feedback, args.feedback_config, args.config, overrides, run_overrides)
     elif args.config is None:  # overrides apply on top of the whole built-in default, section by section
         config = from_dict(PretrainConfig, apply_overrides(to_dict(PretrainConfig()), overrides))
     else:
         config = load_config(PretrainConfig, args.config, overrides)
-    feedback = None
-    if args.feedback is not None:
-        feedback = _feedback_setup(args.feedback, fb_raw, fb_overrides)
     out = args.out or Path("runs") / time.strftime("pretrain-%Y%m%d-%H%M%S")
     from mjx_protamer.outdir import claimed
 
@@ -125,44 +120,43 @@ def _pretrain(args: argparse.Namespace) -> int:
 KIND = "pretrain"  # what outdir.claim records in a pretrain run's directory
 
 
-def _feedback_setup(spec: str, raw: dict, overrides: list[str]):
-    """The FeedbackSetup of `--feedback simulated:KIND`: the feedback section from the file (or the defaults
-    of configs/feedback_KIND.yaml), with the channel of the flag."""
+def _feedback_setup(spec: str, feedback_config: Path | None, pretrain_config: Path | None,
+                    overrides: list[str], run_overrides: list[str]):
+    """(FeedbackSetup, PretrainConfig) of `--feedback simulated:KIND`, from one run config (FeedbackRunConfig,
+    loaded and validated whole): --feedback-config, its feedback section the channel's shipped one
+    (configs/feedback_KIND.yaml) when it has none, its pretrain section --config's when given (else the built-in
+    default when it has none), `--set` on top (pretraining keys with or without `pretrain.`, the other sections'
+    by name), and the channel of the flag."""
     import dataclasses
 
-    from mjx_protamer.config import apply_overrides, from_dict, read_raw, shipped_config
-    from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig, parse_feedback, step_window_note
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.config import apply_overrides, from_dict, read_raw, shipped_config, to_dict
+    from mjx_protamer.experiments.feedback_train import parse_feedback, step_window_note
     from mjx_protamer.experiments.pretrain import FeedbackSetup
-    from mjx_protamer.human.feedback_config import FeedbackConfig
+    from mjx_protamer.human.feedback_config import FeedbackRunConfig
     from mjx_protamer.human.teachers import with_channel
 
     kind = parse_feedback(spec)
-    source = raw if "feedback" in raw else read_raw(shipped_config(f"feedback_{kind}.yaml"))
-    sections = {"feedback": _section(source, "feedback"), "batched": _section(raw, "batched")}
-    apply_overrides(sections, overrides)
-    fb = from_dict(FeedbackConfig, sections["feedback"], "feedback")
-    file_kind = fb.teacher.channel.kind
-    fb = dataclasses.replace(fb, teacher=with_channel(fb.teacher, kind))
-    if "feedback" in raw and file_kind != kind:
+    raw = read_raw(feedback_config)
+    own_feedback = "feedback" in raw
+    if not own_feedback:  # the channel's shipped teacher, credit and reward model
+        raw["feedback"] = read_raw(shipped_config(f"feedback_{kind}.yaml"))["feedback"]
+    if pretrain_config is not None:
+        raw["pretrain"] = read_raw(pretrain_config)
+    elif "pretrain" not in raw:
+        raw["pretrain"] = to_dict(PretrainConfig())  # overrides apply on top of the whole default, as without one
+    # a pretraining key is named in errors as the run's (`pretrain.train.num_envs`), and may be set so too
+    overrides = [o if o.startswith("pretrain.") else f"pretrain.{o}" for o in overrides]
+    run = from_dict(FeedbackRunConfig, apply_overrides(raw, overrides + run_overrides))
+    file_kind = run.feedback.teacher.channel.kind
+    fb = dataclasses.replace(run.feedback, teacher=with_channel(run.feedback.teacher, kind))
+    if own_feedback and file_kind != kind:
         print(f"note: the feedback config's channel is {file_kind}; --feedback {spec} simulates {kind}",
               file=sys.stderr)
     note = step_window_note(kind, fb.credit, fb.dt)
     if note:
         print(note, file=sys.stderr)
-    return FeedbackSetup(kind, fb, from_dict(BatchedFeedbackConfig, sections["batched"], "batched"))
-
-
-def _section(raw: dict, name: str) -> dict:
-    """A section of a config file as a dict ({} when absent or empty), refused with its name when it is not
-    a mapping."""
-    from mjx_protamer.config import ConfigError
-
-    value = raw.get(name)
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise ConfigError(f"config section '{name}' must be a mapping (key: value lines), got {value!r}")
-    return value
+    return FeedbackSetup(kind, fb, run.batched), run.pretrain
 
 
 def _eval(args: argparse.Namespace) -> int:

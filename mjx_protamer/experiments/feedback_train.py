@@ -59,51 +59,17 @@ import optax
 from flax import struct
 from jax.sharding import PartitionSpec as P
 
-from mjx_protamer.config import ConfigError, check
+from mjx_protamer.config import ConfigError
 from mjx_protamer.human.batched import (FeedbackRing, draw_credited_steps, draw_silent_steps, reward_model_updates,
                                         ring_add, ring_init)
 from mjx_protamer.human.credit import CreditConfig, lag_weights, posterior_weights
+from mjx_protamer.human.feedback_config import BatchedFeedbackConfig
 from mjx_protamer.human.reward_model import reward_nets
 from mjx_protamer.human.teachers import (BatchedTeacherState, TeacherConfig, batched_teacher, batched_teacher_init,
                                          env_signal_columns, rule_signals, with_channel)
 from mjx_protamer.step_size import decay_scale
 
 KINDS = ("keyboard", "prosody", "speech")
-
-
-@dataclasses.dataclass(frozen=True)
-class BatchedFeedbackConfig:
-    """How the in-jit feedback path is sized (the `batched` section of a feedback or table2 config)."""
-
-    teach_envs: int = 0  # envs that have a teacher (the first n); 0 = every env
-    # Teachers watch only the envs that act without exploration noise (the last `ddpg.noise.quiet_fraction` of
-    # them): the behaviour the deterministic test episodes measure, as a TAMER teacher watches a greedy agent.
-    # Under noise the arms rarely stop, so a teacher of every env scolds a freeze too rarely for r_hat to learn
-    # it. Measured worse than a teacher on every env (a quarter of the events; docs/experiments.md, "Where r_hat
-    # errs on the learner's own test states"), so it is off by default.
-    teach_quiet: bool = False
-    max_events_per_chunk: int = 0  # events credited per chunk (static shape); 0 = auto from num_envs and min gap
-    rows_per_event: int = 32  # credited steps drawn per event, in proportion to their credit weight
-    replay_updates_per_chunk: int = -1  # reward-model replay minibatches per chunk; -1 = chunk_steps // replay_every
-    # minibatches on the chunk's newly credited rows; -1 = updates_per_feedback x ceil(max events / 3), about one
-    # per event given (Deep TAMER updates on every feedback)
-    fresh_updates_per_chunk: int = -1
-    # steps the teacher watched in silence (labelled 0, each weighing `credit.silence_weight` events) are
-    # represented by this many rows a chunk (per device), drawn uniformly among them; 0: events alone
-    silence_rows_per_chunk: int = 1024
-
-    def validate(self) -> None:
-        check(self.teach_envs >= 0, "teach_envs", f"must be >= 0, got {self.teach_envs}")
-        check(not (self.teach_quiet and self.teach_envs), "teach_quiet",
-              f"picks the envs with a teacher itself: set teach_envs 0 (got {self.teach_envs}) or teach_quiet false")
-        check(self.max_events_per_chunk >= 0, "max_events_per_chunk", f"must be >= 0, got {self.max_events_per_chunk}")
-        check(self.rows_per_event >= 1, "rows_per_event", f"must be >= 1, got {self.rows_per_event}")
-        check(self.fresh_updates_per_chunk >= -1, "fresh_updates_per_chunk",
-              f"must be >= -1, got {self.fresh_updates_per_chunk}")
-        check(self.silence_rows_per_chunk >= 0, "silence_rows_per_chunk",
-              f"must be >= 0, got {self.silence_rows_per_chunk}")
-        check(self.replay_updates_per_chunk >= -1, "replay_updates_per_chunk",
-              f"must be >= -1, got {self.replay_updates_per_chunk}")
 
 
 def human_reward(apply):

@@ -24,7 +24,7 @@ from mjx_protamer.atomic import write_atomic
 from mjx_protamer.config import ConfigError, check_resume_config, to_dict
 from mjx_protamer.experiments import checkpoints, memory, metrics, run_log, runner, saved_reward_model
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate
-from mjx_protamer.experiments.run_loader import CONFIG_NAME, SELECTED_DIR
+from mjx_protamer.experiments.run_loader import CONFIG_NAME, SELECTED_DIR, read_run_config
 
 
 def run_pretrain(
@@ -60,8 +60,8 @@ def run_pretrain(
         if not existing:
             raise ConfigError(f"--resume: {out} holds no checkpoint to continue from; leave out --resume to "
                               f"start a new run (in a new or empty --out), or give the --out of the run to continue")
-        if config_path.is_file():
-            check_resume_config(config_path, config)
+        if config_path.is_file():  # read as `eval` reads it: a run saved before a knob existed keeps its value
+            check_resume_config(config_path, config, lambda path: read_run_config(path.parent))
     elif existing:
         raise ConfigError(f"{out} already holds a run (checkpoint {existing[-1]}); pass --resume or another --out")
 
@@ -267,7 +267,8 @@ class FeedbackSetup:
     """What `run_pretrain(feedback=...)` needs: the simulated channel, the feedback config, the batch sizing."""
 
     def __init__(self, kind: str, config, batched=None):
-        from mjx_protamer.experiments.feedback_train import KINDS, BatchedFeedbackConfig
+        from mjx_protamer.experiments.feedback_train import KINDS
+        from mjx_protamer.human.feedback_config import BatchedFeedbackConfig
 
         if kind not in KINDS:
             raise ConfigError(f"feedback kind {kind!r} is not one of {', '.join(KINDS)}")

@@ -1,11 +1,15 @@
-"""The human side of a run as configuration: credit, reward model, simulated teacher, timing, and a live session.
+"""The one run schema: a run's pretraining, its human side (credit, reward model, simulated teacher, timing), the
+in-jit feedback path's sizing, a live session's learner and Deep COACH's.
 
-`configs/feedback_*.yaml` are `FeedbackRunConfig`s: a pretrain section (a PretrainConfig: what `pretrain
---feedback` trains; a live session takes the checkpoint's instead, except the DDPG keys in
-`SESSION_DDPG_KEYS`), the feedback section, the session section and the coach section (what a
-`finetune --learner coach` session's Deep COACH learns with; `--coach-delay-s` and `--coach-init actor` set
-its delay and its network's shape on top). Loaded by the one validating loader
-(`mjx_protamer.config.load_config`).
+`FeedbackRunConfig` is what every command that trains with feedback reads, through the one validating loader
+(`mjx_protamer.config.load_config`): `configs/feedback_*.yaml` (`pretrain --feedback-config`, `finetune
+--config`) and, extended by the conditions and seeds, table2's files (`experiments/table2/config.py`
+`Table2Config`). Its sections: pretrain (a PretrainConfig: what `pretrain --feedback` trains; a live session
+takes the checkpoint's instead, except the DDPG keys in `SESSION_DDPG_KEYS`), feedback, batched (how the in-jit
+feedback path of `pretrain --feedback` and table2 is sized), session (a live session's learner) and coach (what a
+`finetune --learner coach` session's Deep COACH learns with; `--coach-delay-s` and `--coach-init actor` set its
+delay and its network's shape on top). A command reads the sections it uses; the others may be present in its
+file, and are validated all the same.
 """
 
 from __future__ import annotations
@@ -46,6 +50,41 @@ class FeedbackConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class BatchedFeedbackConfig:
+    """How the in-jit feedback path is sized (the `batched` section of a feedback or table2 config)."""
+
+    teach_envs: int = 0  # envs that have a teacher (the first n); 0 = every env
+    # Teachers watch only the envs that act without exploration noise (the last `ddpg.noise.quiet_fraction` of
+    # them): the behaviour the deterministic test episodes measure, as a TAMER teacher watches a greedy agent.
+    # Under noise the arms rarely stop, so a teacher of every env scolds a freeze too rarely for r_hat to learn
+    # it. Measured worse than a teacher on every env (a quarter of the events; docs/experiments.md, "Where r_hat
+    # errs on the learner's own test states"), so it is off by default.
+    teach_quiet: bool = False
+    max_events_per_chunk: int = 0  # events credited per chunk (static shape); 0 = auto from num_envs and min gap
+    rows_per_event: int = 32  # credited steps drawn per event, in proportion to their credit weight
+    replay_updates_per_chunk: int = -1  # reward-model replay minibatches per chunk; -1 = chunk_steps // replay_every
+    # minibatches on the chunk's newly credited rows; -1 = updates_per_feedback x ceil(max events / 3), about one
+    # per event given (Deep TAMER updates on every feedback)
+    fresh_updates_per_chunk: int = -1
+    # steps the teacher watched in silence (labelled 0, each weighing `credit.silence_weight` events) are
+    # represented by this many rows a chunk (per device), drawn uniformly among them; 0: events alone
+    silence_rows_per_chunk: int = 1024
+
+    def validate(self) -> None:
+        check(self.teach_envs >= 0, "teach_envs", f"must be >= 0, got {self.teach_envs}")
+        check(not (self.teach_quiet and self.teach_envs), "teach_quiet",
+              f"picks the envs with a teacher itself: set teach_envs 0 (got {self.teach_envs}) or teach_quiet false")
+        check(self.max_events_per_chunk >= 0, "max_events_per_chunk", f"must be >= 0, got {self.max_events_per_chunk}")
+        check(self.rows_per_event >= 1, "rows_per_event", f"must be >= 1, got {self.rows_per_event}")
+        check(self.fresh_updates_per_chunk >= -1, "fresh_updates_per_chunk",
+              f"must be >= -1, got {self.fresh_updates_per_chunk}")
+        check(self.silence_rows_per_chunk >= 0, "silence_rows_per_chunk",
+              f"must be >= 0, got {self.silence_rows_per_chunk}")
+        check(self.replay_updates_per_chunk >= -1, "replay_updates_per_chunk",
+              f"must be >= -1, got {self.replay_updates_per_chunk}")
+
+
+@dataclasses.dataclass(frozen=True)
 class SessionConfig:
     """How a live session's learner spends the machine and the person's feedback (mjx_protamer/live/;
     docs/human_feedback.md, "How a session learns")."""
@@ -79,11 +118,12 @@ class SessionConfig:
 
 @dataclasses.dataclass(frozen=True)
 class FeedbackRunConfig:
-    """configs/feedback_*.yaml: a pretrain config (env, ddpg, train), the feedback section, a session's and
-    Deep COACH's."""
+    """One run: a pretrain config (env, ddpg, train), the feedback section, the in-jit path's sizing, a live
+    session's learner and Deep COACH's (configs/feedback_*.yaml; table2's files extend it)."""
 
     pretrain: PretrainConfig = dataclasses.field(default_factory=PretrainConfig)
     feedback: FeedbackConfig = dataclasses.field(default_factory=FeedbackConfig)
+    batched: BatchedFeedbackConfig = dataclasses.field(default_factory=BatchedFeedbackConfig)
     session: SessionConfig = dataclasses.field(default_factory=SessionConfig)
     coach: CoachConfig = dataclasses.field(default_factory=CoachConfig)
 
@@ -93,7 +133,7 @@ class FeedbackRunConfig:
 
 
 def load_feedback_config(path=None, overrides=None) -> FeedbackRunConfig:
-    """Load a FeedbackRunConfig; the `pretrain` section is a PretrainConfig (DDPG engineer's)."""
+    """Load a FeedbackRunConfig from a YAML file (its defaults when path is None) with `a.b=value` overrides."""
     from mjx_protamer.config import load_config
 
     return load_config(FeedbackRunConfig, path, overrides)

@@ -104,12 +104,9 @@ def test_resume_with_feedback_is_exact(keyboard_run):
     args = ["pretrain", "--config", str(pre), "--feedback", "simulated:keyboard", "--feedback-config", str(fb),
             "--out", str(out), "--no-progress"]
     from mjx_protamer.commands.train import _feedback_setup
-    from mjx_protamer.config import load_config
-    from mjx_protamer.agents.ddpg.config import PretrainConfig
     from mjx_protamer.experiments.pretrain import run_pretrain
 
-    config = load_config(PretrainConfig, pre)
-    setup = _feedback_setup("simulated:keyboard", {"feedback": FEEDBACK}, [])
+    setup, config = _feedback_setup("simulated:keyboard", fb, pre, [], [])
     run_pretrain(config, out, progress=False, max_chunks=3, feedback=setup)  # "killed" after chunk 3 (ckpt 2)
     assert main(args + ["--resume"]) == 0
     a, b = csv_rows(full / "metrics.csv"), csv_rows(out / "metrics.csv")
@@ -130,7 +127,7 @@ def test_feedback_without_a_feedback_section_runs_the_shipped_feedback_kind_yaml
     from mjx_protamer.config import shipped_config
     from mjx_protamer.human.feedback_config import load_feedback_config
 
-    setup = _feedback_setup(f"simulated:{kind}", {}, ["feedback.credit.decay=0.8"])
+    setup, _ = _feedback_setup(f"simulated:{kind}", None, None, [], ["feedback.credit.decay=0.8"])
     shipped = load_feedback_config(shipped_config(f"feedback_{kind}.yaml"), ["feedback.credit.decay=0.8"]).feedback
     assert setup.kind == kind and setup.config == shipped and setup.config.teacher.channel.kind == kind
     assert (setup.config.credit.silence_weight, setup.config.reward_model.bounded) == (0.03, True)

@@ -134,3 +134,83 @@ def test_env_freeze_speed_is_the_freeze_metric_threshold(tiny_run):
     env = PointReachEnv(config.toy)
     assert evaluate(never, env, actor, 2, 0)["freeze_ratio"] < 0.5
     assert evaluate(always, env, actor, 2, 0)["freeze_ratio"] == 1.0
+
+
+# --- one run schema (FeedbackRunConfig) and the typed resume check ---------------------------------------------
+
+
+def test_every_command_reads_a_run_s_sections_alike(tmp_path):
+    """A feedback file's sections (batched among them) load in `finetune`'s loader and as table2's run sections to
+    the same values; a table2 file may hold a live session's sections too."""
+    from mjx_protamer.config import shipped_config
+    from mjx_protamer.experiments.table2 import load_table2_config
+    from mjx_protamer.human.feedback_config import load_feedback_config
+
+    path = tmp_path / "run.yaml"
+    path.write_text(shipped_config("feedback_keyboard.yaml").read_text()
+                    + "batched:\n  rows_per_event: 8\ncoach:\n  window: 5\n")
+    run, table2 = load_feedback_config(path), load_table2_config(path)
+    assert (run.batched.rows_per_event, run.coach.window) == (8, 5)
+    for section in ("pretrain", "feedback", "batched", "session", "coach"):
+        assert getattr(table2, section) == getattr(run, section), section
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["pretrain", "--feedback", "simulated:keyboard", "--set", "coach.window=abc"],
+     "config field 'coach.window': expected an integer"),
+    (["pretrain", "--feedback", "simulated:keyboard", "--set", "session.no_such_knob=1"],
+     "unknown config key(s) session.no_such_knob"),
+    (["pretrain", "--feedback", "simulated:keyboard", "--set", "batched.rows_per_event=0"],
+     "config field 'batched.rows_per_event': must be >= 1"),
+    (["pretrain", "--feedback", "simulated:keyboard", "--set", "pretrain.train.num_envs=x"],
+     "config field 'pretrain.train.num_envs': expected an integer"),
+    (["pretrain", "--set", "coach.window=3"], "need --feedback simulated:KIND"),
+    (["reproduce", "table2", "--set", "coach.window=0"], "config field 'coach.window': must be >= 1"),
+    (["reproduce", "table2", "--set", "session.spare_fraction=2"], "config field 'session.spare_fraction'"),
+], ids=lambda v: " ".join(v) if isinstance(v, list) else None)
+def test_every_section_is_settable_and_a_bad_value_is_named(tmp_path, capsys, argv, says):
+    code, err = run_cli(capsys, *argv, "--out", tmp_path / "out")
+    assert code == 2 and len(err) == 1 and says in err[0], err
+    assert not (tmp_path / "out").exists()
+
+
+def test_resume_compares_the_typed_config_and_names_what_differs(tmp_path):
+    import dataclasses
+
+    import yaml
+
+    from mjx_protamer.config import ConfigError, check_resume_config, to_dict
+    from mjx_protamer.experiments.table2 import Table2Config
+
+    cfg = Table2Config()
+    old = to_dict(cfg)
+    del old["session"], old["coach"], old["batched"]["rows_per_event"]  # written before they joined the schema
+    saved = tmp_path / "config.yaml"
+    saved.write_text(yaml.safe_dump(old, default_flow_style=True))  # and formatted otherwise
+    check_resume_config(saved, cfg)
+    with pytest.raises(ConfigError, match=r"the config differs from the one saved in .* in feedback\.dt, seeds$"):
+        check_resume_config(saved, dataclasses.replace(cfg, seeds=(0, 1), feedback=dataclasses.replace(
+            cfg.feedback, dt=0.01)))
+    saved.write_text(yaml.safe_dump(dict(old, no_such_section=1)))
+    with pytest.raises(ConfigError, match="no longer loads: unknown config key"):
+        check_resume_config(saved, cfg)
+
+
+def test_pretrain_resume_reads_the_saved_config_as_eval_does(tmp_path):
+    """A run saved before env.habituation_s existed ran without a familiarity trace: it continues with 0, not
+    with today's default."""
+    import dataclasses
+
+    import yaml
+
+    from mjx_protamer.config import ConfigError, check_resume_config, to_dict
+    from mjx_protamer.experiments.run_loader import read_run_config
+
+    old = to_dict(PretrainConfig())
+    del old["env"]["habituation_s"]
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(old))
+    read = lambda path: read_run_config(path.parent)  # noqa: E731
+    then = dataclasses.replace(PretrainConfig(), env=dataclasses.replace(PretrainConfig().env, habituation_s=0.0))
+    check_resume_config(tmp_path / "config.yaml", then, read)
+    with pytest.raises(ConfigError, match="in env.habituation_s$"):
+        check_resume_config(tmp_path / "config.yaml", PretrainConfig(), read)

@@ -1,15 +1,13 @@
-"""Table II's schema: the conditions, the seeds and the sections of one run (pretrain, feedback, batched), and
-the loader of a table2 YAML."""
+"""Table II's schema: the run schema (`FeedbackRunConfig`: pretrain, feedback, batched, session, coach) with the
+conditions and the seeds, and the loader of a table2 YAML."""
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Literal
 
-from mjx_protamer.agents.ddpg.config import PretrainConfig
 from mjx_protamer.config import ConfigError, check, check_seed, from_dict, read_raw, shipped_config
-from mjx_protamer.experiments.feedback_train import BatchedFeedbackConfig
-from mjx_protamer.human.feedback_config import FeedbackConfig
+from mjx_protamer.human.feedback_config import FeedbackRunConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,15 +30,16 @@ DEFAULT_CONDITIONS = (Condition("DDPG", "none"), Condition("DTK", "keyboard"), C
 
 
 @dataclasses.dataclass(frozen=True)
-class Table2Config:
-    pretrain: PretrainConfig = dataclasses.field(default_factory=PretrainConfig)
-    feedback: FeedbackConfig = dataclasses.field(default_factory=FeedbackConfig)  # rule, model, dt
-    batched: BatchedFeedbackConfig = dataclasses.field(default_factory=BatchedFeedbackConfig)
+class Table2Config(FeedbackRunConfig):
+    """One run's sections (table2 reads pretrain, feedback and batched; session and coach may be present) with the
+    conditions trained side by side on the seeds."""
+
     conditions: tuple[Condition, ...] = DEFAULT_CONDITIONS
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)  # the issue-8 protocol: 5 seeds, vmapped
     moving_average: int = 10  # chunks in Figure 1's moving average
 
     def validate(self) -> None:
+        super().validate()
         check(len(self.conditions) >= 1, "conditions", "needs at least one condition")
         names = [c.name for c in self.conditions]
         check(len(set(names)) == len(names), "conditions", f"names must be unique, got {names}")
