@@ -76,7 +76,7 @@ def _render(args: argparse.Namespace) -> int:
         prepare_gl_for(args.checkpoint)
     except GLUnavailable as e:
         return _fail(str(e))
-    from mjx_protamer.commands.train import _enable_compile_cache
+    from mjx_protamer.compile_cache import enable as _enable_compile_cache
 
     _enable_compile_cache()
     try:

@@ -1,6 +1,6 @@
 """`protamer reproduce table2`: the paper's Table II and Figures 1-2 with simulated teachers; `reproduce rescore`:
 the agents of a finished table2 run scored again under another teacher rule; `reproduce live`: whether minutes of
-a live session steer the infant, per feedback channel (experiments/live_effect.py)."""
+a live session steer the infant, per feedback channel (live/effect.py)."""
 
 from __future__ import annotations
 
@@ -120,7 +120,7 @@ MAX_SEEDS = 100_000  # --seeds N runs seeds 0..N-1 side by side; the memory esti
 
 def _table2(args: argparse.Namespace) -> int:
     from mjx_protamer.cli_numbers import number
-    from mjx_protamer.commands.train import _enable_compile_cache
+    from mjx_protamer.compile_cache import enable as _enable_compile_cache
     from mjx_protamer.experiments.table2 import load_table2_config
 
     seeds = None if args.seeds is None else number("--seeds", args.seeds, 1, MAX_SEEDS, integer=True)
@@ -189,7 +189,7 @@ def _processes(args: argparse.Namespace):
 
 def _table2_processes(args: argparse.Namespace, cfg, spec, own) -> int:
     """This process's part of a table2 run on several processes; process 0 prints the table."""
-    from mjx_protamer.commands.train import _enable_compile_cache
+    from mjx_protamer.compile_cache import enable as _enable_compile_cache
     from mjx_protamer.errors import write_failed
     from mjx_protamer.experiments.distributed import run_table2_processes
 
@@ -222,7 +222,7 @@ def _table2_write_failed(e: OSError, out: Path, cfg):
 
 
 def _rescore(args: argparse.Namespace) -> int:
-    from mjx_protamer.commands.train import _enable_compile_cache
+    from mjx_protamer.compile_cache import enable as _enable_compile_cache
     from mjx_protamer.config import ConfigError
     from mjx_protamer.experiments.table2 import load_table2_config
     from mjx_protamer.outdir import claimed
@@ -252,7 +252,7 @@ def _rescore(args: argparse.Namespace) -> int:
 def _live(args: argparse.Namespace) -> int:
     from mjx_protamer.cli_numbers import number
     from mjx_protamer.config import ConfigError
-    from mjx_protamer.experiments.live_effect import CHANNELS, Plan, pretrain_checkpoints, run_live_effect
+    from mjx_protamer.live.effect import CHANNELS, Plan, pretrain_checkpoints, run_live_effect
     from mjx_protamer.live.spec import check_config_file
     from mjx_protamer.outdir import claimed, kind_of
 

@@ -9,6 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+from mjx_protamer.compile_cache import enable as enable_compile_cache
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -58,19 +60,6 @@ def register(subparsers) -> None:
 MAX_EPISODES = 10_000  # test episodes of one eval or render: each is a whole rollout held in memory
 
 
-def _enable_compile_cache() -> None:
-    """Persist XLA compiles across runs (the self-touch chunk takes minutes to compile on 2 CPU cores).
-    JAX_COMPILATION_CACHE_DIR, when set, wins."""
-    import os
-
-    import jax
-
-    if not os.environ.get("JAX_COMPILATION_CACHE_DIR"):
-        jax.config.update("jax_compilation_cache_dir",
-                          os.path.join(os.path.expanduser("~"), ".cache", "mjx_protamer", "jax"))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-
-
 # `--set` keys of a run's other sections (mjx_protamer/human/feedback_config.py FeedbackRunConfig); the rest are
 # the PretrainConfig's. Pretraining uses feedback and batched; session and coach are validated, unused.
 RUN_SECTIONS = ("feedback", "batched", "session", "coach")
@@ -100,7 +89,7 @@ def _pretrain(args: argparse.Namespace) -> int:
 
     # --out is checked, created and locked before JAX starts, and stays locked until the run ends
     with claimed(out, KIND, resume=args.resume, own=("config.yaml",)):
-        _enable_compile_cache()
+        enable_compile_cache()
         from mjx_protamer.errors import write_failed
         from mjx_protamer.experiments.pretrain import last_good_checkpoint, report, run_pretrain
 
@@ -166,7 +155,7 @@ def _eval(args: argparse.Namespace) -> int:
     args.seed = seed("--seed", args.seed)
     if (args.body_map or "").lower() != "none":
         _prepare_body_map_gl(args.checkpoint)
-    _enable_compile_cache()
+    enable_compile_cache()
     from mjx_protamer.experiments import metrics
     from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
 

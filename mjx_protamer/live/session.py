@@ -20,6 +20,7 @@ import sys
 import time
 from pathlib import Path
 
+from mjx_protamer.compile_cache import enable as enable_compile_cache
 from mjx_protamer.live.spec import SessionSpec
 
 KIND = "finetune-session"  # what outdir.claim records
@@ -28,12 +29,6 @@ KIND = "finetune-session"  # what outdir.claim records
 def _fail(msg: str, code: int = 2) -> int:
     print(f"protamer finetune: {msg}", file=sys.stderr, flush=True)
     return code
-
-
-def _enable_compile_cache() -> None:
-    from mjx_protamer.commands.train import _enable_compile_cache as enable
-
-    enable()
 
 
 def _voice_check(spec: SessionSpec):
@@ -198,7 +193,7 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
     print(f"[finetune] saved in {spec.out}: {s['events']} events{' since the resume' if segment else ''}, queue "
           f"{learner.queue.stats()}{ups}{rt}", flush=True)
     if spec.calibrate is not None:  # the session is saved whatever the fit says
-        from mjx_protamer.commands.reaction_delay import measure
+        from mjx_protamer.live.reaction_delay import measure
 
         out = spec.out
         for old in (out / "reaction_delay.json", out / "reaction_delay.png"):  # an earlier stretch's fit
@@ -270,7 +265,7 @@ def start(spec: SessionSpec) -> int:
                      f"{env_name} run")
     lease = claim(spec.out, KIND)
     try:
-        _enable_compile_cache()  # the next session on this checkpoint starts in seconds
+        enable_compile_cache()  # the next session on this checkpoint starts in seconds
         print(f"[finetune] loading {spec.checkpoint} (the first chunk compiles: this can take a minute or two)",
               flush=True)
         try:
@@ -335,7 +330,7 @@ def resume(out: Path, **flags) -> int:
         voice = _voice_check(spec)
         if voice is not None:
             return _fail(voice[1], voice[0])
-        _enable_compile_cache()
+        enable_compile_cache()
         try:
             loaded = load_checkpoint(step_dir, backend=manifest.get("env_backend"))
         except CheckpointError as e:
@@ -404,7 +399,7 @@ def replay(source: Path, out: Path) -> int:
     step_dir = _checkpoint_of(manifest, Path(source))
     lease = claim(out, KIND)
     try:
-        _enable_compile_cache()
+        enable_compile_cache()
         try:
             loaded = load_checkpoint(step_dir, backend=manifest.get("env_backend"))
         except CheckpointError as e:

@@ -157,7 +157,7 @@ def test_rescore_refuses_an_out_that_is_not_new_or_empty(table2_run, tmp_path, c
 
 
 def test_reproduce_live_continues_its_own_directory_and_refuses_others(pretrain_run, tmp_path, capsys, monkeypatch):
-    from mjx_protamer.experiments import live_effect
+    from mjx_protamer.live import effect as live_effect
 
     def result(out):
         (out / "live_effect.md").write_text("table")
