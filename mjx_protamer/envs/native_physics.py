@@ -18,11 +18,11 @@ penetration and the world position. The deepest `n_contacts` active slots of a w
 the MJX env's selection (`max_contact_points` deepest per condim group). The sensors are added to a
 copy of the model; they read the physics and never change it.
 
-Sensing runs here too, on the host, in float64 (`sensing.sense`, the code the MJX env runs in JAX and
-the twin in NumPy): a world has 0.4 active self-contacts on average, so the call compacts the batch to
-the worlds that touch and to as many contact entries as the busiest of them has, and senses only those
-(the MJX env's fixed-shape JAX sensing runs every entry of every world). A world without contact gets
-zero touch features and no regions, as `sense` gives it. What returns to JAX is only what the env's
+Sensing runs here too, on the host, in float64: `slot_sensing.SlotSensing` gives each world, straight
+from its sensor slots, bit for bit what `sensing.sense` (the code the MJX env runs in JAX and the twin in
+NumPy) gives it, computing only the contact entries that count, for all worlds in one pass (the MJX env's
+fixed-shape JAX sensing runs every entry of every world). A world without contact gets zero touch
+features and no regions, as `sense` gives it. What returns to JAX is only what the env's
 step reads, packed in one float32 row per world (`fields()`).
 """
 
