@@ -93,7 +93,7 @@ def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geo
     geom (..., n, 2) int, pos (..., n, 3), dist (..., n), normal_force (..., n): the contacts (inactive
     ones allowed: dist >= 0 ignores them). geom_xpos (..., ngeom, 3), geom_xmat (..., ngeom, 3, 3): geom
     frames. Any leading shape: one world (the MJX env, vmapped; the twin) or a batch of worlds at once
-    (the native backend's host side, `NativePhysics._sense`).
+    (the native backend's host side, `NativePhysics._sense_reference`; `slot_sensing` is its fast twin).
     """
     # Each contact is seen from its hand geom. A hand-to-hand contact touches both hands: the second
     # hand's view is added for the HAND_HAND_ENTRIES deepest such contacts (more at once is rare).
