@@ -149,10 +149,7 @@ def _table2(args: argparse.Namespace) -> int:
                 result = run_table2(cfg, out, progress=not args.quiet, resume=args.resume)
         except OSError as e:  # a full disk, no permission: one line, and what --resume keeps
             raise _table2_write_failed(e, out, cfg) from None
-    print(Path(result["table_md"]).read_text())
-    for key in ("table_md", "table_json", "figure1", "figure2", "training_csv"):
-        print(f"{key:<13} {result[key]}")
-    print(f"wall time     {result['wall_s']:.0f} s")
+    _print_table2(result, cfg)
     return 0
 
 
@@ -203,11 +200,20 @@ def _table2_processes(args: argparse.Namespace, cfg, spec, own) -> int:
                            "continue with the same command and --resume") from None
     if result is None:  # not process 0: its seeds are in the table process 0 writes
         return 0
+    _print_table2(result, cfg)
+    return 0
+
+
+def _print_table2(result: dict, cfg) -> None:
+    """The table, the per-condition body maps (drawn here: a body map renders the infant, which is the view's, and
+    the run's library sits below it) and the files written."""
+    from mjx_protamer.view.bodymap import write_condition_body_maps
+
     print(Path(result["table_md"]).read_text())
+    write_condition_body_maps(cfg.pretrain, result["region_frequencies"], result["out_dir"])
     for key in ("table_md", "table_json", "figure1", "figure2", "training_csv"):
         print(f"{key:<13} {result[key]}")
     print(f"wall time     {result['wall_s']:.0f} s")
-    return 0
 
 
 def _table2_write_failed(e: OSError, out: Path, cfg):

@@ -72,3 +72,22 @@ def write_body_map(frequency, path: str | Path, title: str = "", env_config=None
         plt.close(fig)
     return path
 
+
+def write_condition_body_maps(run_config, frequencies: dict, out_dir: str | Path) -> list[Path]:
+    """One body map per condition of a table2 run, as body_map_<condition>.png in out_dir, from
+    `table2.artifacts.region_frequencies` ({condition: {"frequency": per region, "seeds": n}}). Nothing for the
+    toy env; a machine without offscreen OpenGL gets a note instead of the pictures."""
+    import sys
+
+    from mjx_protamer.view.gl import GLUnavailable
+
+    if run_config.env_name == "toy":
+        return []
+    paths = []
+    try:
+        for name, per in frequencies.items():
+            paths.append(write_body_map(np.asarray(per["frequency"]), Path(out_dir) / f"body_map_{name}.png",
+                                        f"{name}: where the hands touch ({per['seeds']} seed(s))", run_config.env))
+    except GLUnavailable as e:
+        print(f"note: no body maps: {e}", file=sys.stderr)
+    return paths

@@ -83,7 +83,7 @@ def test_reproduce_table2_without_config_runs_the_yaml_shipped_in_the_package(tm
     def run_table2(cfg, out, progress=True, resume=False):
         ran.append(cfg)
         (out / "table2.md").write_text("table\n")
-        return {"table_md": str(out / "table2.md"), "wall_s": 0.0,
+        return {"table_md": str(out / "table2.md"), "wall_s": 0.0, "out_dir": str(out), "region_frequencies": {},
                 **{k: "" for k in ("table_json", "figure1", "figure2", "training_csv")}}
 
     monkeypatch.setattr(table2, "run_table2", run_table2)

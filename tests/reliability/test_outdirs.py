@@ -138,8 +138,8 @@ def test_table2_refuses_what_is_not_new_empty_or_its_own_run(pretrain_run, table
     def result(out):
         (out / "table2.md").write_text("table")
         written[out] = True
-        return {"table_md": str(out / "table2.md"), "wall_s": 0.0, **{k: "" for k in
-                ("table_json", "figure1", "figure2", "training_csv")}}
+        return {"table_md": str(out / "table2.md"), "wall_s": 0.0, "out_dir": str(out), "region_frequencies": {},
+                **{k: "" for k in ("table_json", "figure1", "figure2", "training_csv")}}
 
     calls = _stand_in(monkeypatch, table2, "run_table2", "table2", result)
     assert run_cli(capsys, "reproduce", "table2", "--config", cfg, "--resume", "--out", table2_run)[0] == 0

@@ -162,12 +162,17 @@ def test_render_and_eval_body_map_of_a_self_touch_run(gl_backend, tmp_path):
 
 def test_table2_body_maps_one_per_condition_averaged_over_seeds(gl_backend, tmp_path):
     from mjx_protamer.agents.ddpg.config import PretrainConfig
-    from mjx_protamer.experiments.table2.artifacts import write_condition_body_maps
+    from mjx_protamer.experiments.table2.artifacts import region_frequencies
+    from mjx_protamer.view.bodymap import write_condition_body_maps
 
     f = np.eye(8)
     evals = {"DDPG": {0: {"region_touch_frequency": f[0] * 0.2}, 1: {"region_touch_frequency": f[0] * 0.4}},
              "DTK": {0: {"region_touch_frequency": f[3] * 0.5}, 1: {"region_touch_frequency": f[2] * 0.5}}}
-    paths = write_condition_body_maps(PretrainConfig(), evals, tmp_path)
+    freq = region_frequencies(evals)
+    np.testing.assert_allclose(freq["DDPG"]["frequency"], f[0] * 0.3)
+    np.testing.assert_allclose(freq["DTK"]["frequency"], (f[3] + f[2]) * 0.25)
+    assert freq["DTK"]["seeds"] == 2
+    paths = write_condition_body_maps(PretrainConfig(), freq, tmp_path)
     assert [p.name for p in paths] == ["body_map_DDPG.png", "body_map_DTK.png"] and all(p.is_file() for p in paths)
     import dataclasses
-    assert write_condition_body_maps(dataclasses.replace(PretrainConfig(), env_name="toy"), evals, tmp_path) == []
+    assert write_condition_body_maps(dataclasses.replace(PretrainConfig(), env_name="toy"), freq, tmp_path) == []

@@ -18,8 +18,7 @@ import is re-exported here.
 """
 
 from mjx_protamer.experiments.stats import contrast, seed_stats
-from mjx_protamer.experiments.table2.artifacts import (plot_regions, plot_training, write_condition_body_maps,
-                                                       write_table2)
+from mjx_protamer.experiments.table2.artifacts import plot_regions, plot_training, region_frequencies, write_table2
 from mjx_protamer.experiments.table2.config import (DEFAULT_CONDITIONS, DEFAULT_CONFIG, Condition, Table2Config,
                                                     load_table2_config)
 from mjx_protamer.experiments.table2.models import (load_condition_agents,
@@ -35,5 +34,5 @@ __all__ = ["DEFAULT_CONDITIONS", "DEFAULT_CONFIG", "LABELS", "PAPER", "SELECTION
            "load_condition_agents", "load_condition_models", "load_condition_reward_models",
            "load_finished_condition", "load_table2_config", "make_seed_evaluator", "memory_per_seed",
            "plot_regions", "plot_training", "pooled_corr", "reward_preset_name", "run_table2",
-           "save_condition_models", "seed_stats", "summarize", "train_table2", "write_condition_body_maps",
+           "save_condition_models", "seed_stats", "summarize", "train_table2", "region_frequencies",
            "write_table2"]

@@ -20,11 +20,12 @@ if TYPE_CHECKING:
 
 
 def write_table2(cfg: Table2Config, out_dir, trained: Trained, total_s: float, extra: dict | None = None) -> dict:
-    """table2.json / table2.md (with `extra`'s keys added to the summary), the figures, training.csv and the body
-    maps of a trained run into `out_dir`; the paths, the wall time and the summary."""
+    """table2.json / table2.md (with `extra`'s keys added to the summary), the figures and training.csv of a trained
+    run into `out_dir`; the paths, the wall time, the summary and each condition's region frequencies (the command
+    draws their body maps: a body map renders the infant, which is the view's, above this layer)."""
     from mjx_protamer.atomic import write_atomic
 
-    out, pre = Path(out_dir), cfg.pretrain
+    out = Path(out_dir)
     training, evals = trained.training, trained.evals
     _write_training_csv(training, out / "training.csv")
     summary = {**summarize(cfg, evals, trained.wall, total_s), **(extra or {})}
@@ -32,10 +33,9 @@ def write_table2(cfg: Table2Config, out_dir, trained: Trained, total_s: float, e
     write_atomic(out / "table2.md", format_markdown(summary))
     fig1 = plot_training(training, cfg, out / "figure1_training_reward.png")
     fig2 = plot_regions(summary, out / "figure2_unique_regions.png")
-    write_condition_body_maps(pre, evals, out)
     return {"out_dir": str(out), "table_md": str(out / "table2.md"), "table_json": str(out / "table2.json"),
             "figure1": str(fig1), "figure2": str(fig2), "training_csv": str(out / "training.csv"),
-            "wall_s": total_s, "summary": summary}
+            "wall_s": total_s, "summary": summary, "region_frequencies": region_frequencies(evals)}
 
 
 def _write_training_csv(rows: list[dict], path: Path) -> None:
@@ -128,24 +128,8 @@ def plot_regions(summary: dict, path: Path) -> Path:
     return path
 
 
-def write_condition_body_maps(run_config, evals: dict, out_dir: str | Path) -> list[Path]:
-    """One body map per condition (region frequencies averaged over its seeds), as body_map_<condition>.png in
-    out_dir. Nothing for the toy env; a machine without offscreen OpenGL gets a note instead of the pictures.
-
-    The one import of `view` below it: a body map renders the infant (OpenGL), which is the view's."""
-    import sys
-
-    from mjx_protamer.view.bodymap import write_body_map
-    from mjx_protamer.view.gl import GLUnavailable
-
-    if run_config.env_name == "toy":
-        return []
-    paths = []
-    try:
-        for name, per_seed in evals.items():
-            freq = np.mean([ev["region_touch_frequency"] for ev in per_seed.values()], axis=0)
-            paths.append(write_body_map(freq, Path(out_dir) / f"body_map_{name}.png",
-                                        f"{name}: where the hands touch ({len(per_seed)} seed(s))", run_config.env))
-    except GLUnavailable as e:
-        print(f"note: no body maps: {e}", file=sys.stderr)
-    return paths
+def region_frequencies(evals: dict) -> dict[str, dict]:
+    """Per condition, how often each body region was touched in its test episodes, averaged over its seeds (what
+    a body map draws; the command draws them, `view.bodymap.write_condition_body_maps`)."""
+    return {name: {"frequency": np.mean([ev["region_touch_frequency"] for ev in per_seed.values()], axis=0).tolist(),
+                   "seeds": len(per_seed)} for name, per_seed in evals.items()}
