@@ -150,14 +150,12 @@ def sense(xp, tables: dict[str, Any], k: int, geom, pos, dist, normal_force, geo
     return touch, touched[..., :N_REGIONS], touched[..., N_REGIONS:]
 
 
-def _entry_geometry(xp, tables, k: int, hand_i, p_world, frame_pos, frame_mat):
-    """Per contact entry (any leading shape): its position in the hand geom's frame, its projection on
-    the surface, the positions of its k nearest sensors (x, y, z, each (..., k)) and the sum of its
-    fall-off weights over the sensors."""
+def entry_voxel(xp, tables, hand_i, p_world, frame_pos, frame_mat):
+    """Per contact entry: its position in the hand geom's frame, its projection on the surface, and the voxel of
+    the hand geom's grid that lists its candidate sensors."""
     # Contact position in the hand geom's frame (row vectors: R^T (p - x) == (p - x) @ R).
     p_local = xp.einsum("...i,...ij->...j", p_world - frame_pos, frame_mat)
     q = project_to_surface(xp, p_local, tables["half_length"][hand_i], tables["radius"][hand_i])
-
     # Candidate sensors from the voxel grid of the hand geom: one row of positions each (padding is a
     # far-away dummy sensor that never gets weight).
     cell = tables["grid_cell"][hand_i][..., None]
@@ -166,6 +164,14 @@ def _entry_geometry(xp, tables, k: int, hand_i, p_world, frame_pos, frame_mat):
     ijk = xp.minimum(xp.maximum(ijk, 0), dims - 1)
     voxel = (tables["grid_offset"][hand_i] + (ijk[..., 0] * dims[..., 1] + ijk[..., 1]) * dims[..., 2]
              + ijk[..., 2])
+    return p_local, q, voxel
+
+
+def _entry_geometry(xp, tables, k: int, hand_i, p_world, frame_pos, frame_mat):
+    """Per contact entry (any leading shape): its position in the hand geom's frame, its projection on
+    the surface, the positions of its k nearest sensors (x, y, z, each (..., k)) and the sum of its
+    fall-off weights over the sensors."""
+    p_local, q, voxel = entry_voxel(xp, tables, hand_i, p_world, frame_pos, frame_mat)
     # Positions are component-major, (..., 3, C): XLA's CPU loops vectorise over C, not over xyz.
     cand_pos = tables["candidate_pos"][voxel]
     d = xp.sqrt(sum((cand_pos[..., a, :] - q[..., a, None]) ** 2 for a in range(3)))  # (..., C)

@@ -22,7 +22,6 @@ from __future__ import annotations
 import numpy as np
 
 from mjx_protamer.envs import sensing
-from mjx_protamer.envs.touch import project_to_surface
 
 # Beyond these, an intermediate of `sense` could overflow; every physical contact is far inside them.
 _MAX_LOCAL_POS = 1.0e6
@@ -126,14 +125,7 @@ class SlotSensing:
         come from one gather instead of three `take_along_axis`, and the sums of three squares are written
         out (`sense`'s `sum(...)` starts from the integer 0, and 0 + x is x)."""
         tables, k = self.tables, self.k
-        p_local = np.einsum("...i,...ij->...j", p_world - frame_pos, frame_mat)
-        q = project_to_surface(np, p_local, tables["half_length"][hand_i], tables["radius"][hand_i])
-        cell = tables["grid_cell"][hand_i][..., None]
-        dims = tables["grid_dims"][hand_i]
-        ijk = np.floor((q - tables["grid_origin"][hand_i]) / cell).astype(dims.dtype)
-        ijk = np.minimum(np.maximum(ijk, 0), dims - 1)
-        voxel = (tables["grid_offset"][hand_i] + (ijk[..., 0] * dims[..., 1] + ijk[..., 1]) * dims[..., 2]
-                 + ijk[..., 2])
+        p_local, q, voxel = sensing.entry_voxel(np, tables, hand_i, p_world, frame_pos, frame_mat)
         squares = (tables["candidate_pos"][voxel] - q[:, :, None]) ** 2  # (V, 3, C)
         d = np.sqrt(squares[:, 0] + squares[:, 1] + squares[:, 2])
         nearest = sensing.nearest_k(np, d, k)
