@@ -54,17 +54,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a fast smoke run: batch sizes 1,64, 20 steps, 1 repeat, short twin and fidelity runs")
 
 
-def _parse_batch_sizes(text) -> list[int]:
-    if isinstance(text, (list, tuple)):
-        sizes = [int(b) for b in text]
-    else:
-        try:
-            sizes = [int(b) for b in str(text).split(",") if b.strip()]
-        except ValueError:
-            raise ValueError(f"--batch-sizes must be comma-separated positive integers, got {text!r}") from None
-    if not sizes or any(b < 1 for b in sizes):
-        raise ValueError(f"--batch-sizes must be comma-separated positive integers, got {text!r}")
-    return sizes
+def parse_positive_ints(text, flag: str) -> list[int]:
+    """A comma-separated list of positive integers given to `flag` (or a list of them); a ConfigError (one line
+    from the CLI) otherwise."""
+    from mjx_protamer.config import ConfigError
+
+    try:
+        values = [int(b) for b in text] if isinstance(text, (list, tuple)) else \
+            [int(b) for b in str(text).split(",") if b.strip()]
+    except ValueError:
+        values = []
+    if not values or any(b < 1 for b in values):
+        raise ConfigError(f"{flag} must be comma-separated positive integers, got {text!r}")
+    return values
 
 
 def _timed(fn, repeats: int) -> tuple[float, list[float]]:
@@ -333,7 +335,7 @@ def run_env_benchmark(args) -> dict:
     from mjx_protamer.experiments.machine import describe
 
     quick = bool(getattr(args, "quick", False))
-    sizes = _parse_batch_sizes(getattr(args, "batch_sizes", BATCH_SIZES))
+    sizes = parse_positive_ints(getattr(args, "batch_sizes", BATCH_SIZES), "--batch-sizes")
     steps = int(getattr(args, "steps", 200))
     repeats = int(getattr(args, "repeats", 3))
     twin_steps = int(getattr(args, "twin_steps", 2000))

@@ -36,9 +36,10 @@ then a measurement, not an assumption.
 
 `batched_trainer` (issue 40; `--skip-roofline` leaves it out): the batched trainer of `--roofline-config` (the
 main job by default) after its warm-up, with 1 seed and with 5 seeds vmapped in one program (`--roofline-seeds`),
-against its roofline: the chunk's updates at their own matmuls' time plus its env steps at the rate the env
-alone steps the same batch, both measured in the same run. `fraction_of_roofline` is the roofline's time over
-the measured time; `run_train_s_projected` is the whole run's training time at the measured pace.
+against its roofline: the chunk's updates at their own matmuls' time plus its env steps, both measured in the
+same run; the env timed alone on random actions (`fraction_of_roofline`) and as the trainer's own chunk without
+updates from the trained state (`fraction_of_roofline_trained_worlds`: a trained infant touches itself, and touch
+sensing costs what its contacts cost). `run_train_s_projected` is the whole run's training time at this pace.
 
 `machine`: JAX's backend, the device kind (which GPU, if any), cores and load (experiments/machine.py).
 """
@@ -60,8 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="vectorised steps per timed batched run")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--skip-sb3", action="store_true", help="do not run Stable-Baselines3")
-    parser.add_argument("--roofline-config", default="configs/pretrain.yaml",
-                        help="the batched run whose trainer is put against its roofline (default: the main job)")
+    parser.add_argument("--roofline-config", default=None,
+                        help="the batched run whose trainer is put against its roofline (default: the main job, "
+                        "configs/pretrain.yaml)")
     parser.add_argument("--roofline-set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a value of --roofline-config (repeatable)")
     parser.add_argument("--roofline-seeds", default="1,5",
@@ -238,7 +240,7 @@ def _time_chunks(step, state, chunks: int, repeats: int):
     return state, times
 
 
-def time_batched_trainer(config, seeds: int, chunks: int, repeats: int) -> dict:
+def time_batched_trainer(config, env, seeds: int, chunks: int, repeats: int) -> dict:
     """Seconds per chunk of the batched trainer of `config` after its warm-up, `seeds` vmapped in one program,
     median of `repeats` runs of `chunks` chunks; then the same chunks from the same state with no updates (the
     env stepping the worlds the trained policy visits, acting and replay writes: `no_update_chunk_s`). The
@@ -247,9 +249,6 @@ def time_batched_trainer(config, seeds: int, chunks: int, repeats: int) -> dict:
 
     import jax
 
-    from mjx_protamer.experiments.env_factory import make_env
-
-    env = make_env(config)
     init, step = _chunk_runner(config, seeds, env)
     t0 = time.perf_counter()
     state = init(jax.random.PRNGKey(0))
@@ -293,7 +292,7 @@ def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
     for seeds in seed_counts:
         worlds = tc.num_envs * seeds
         env_rate = _bench_env(env, worlds, tc.chunk_steps, repeats)["steps_per_s"]
-        timed = time_batched_trainer(config, seeds, chunks, repeats)
+        timed = time_batched_trainer(config, env, seeds, chunks, repeats)
         updates = tc.chunk_steps * tc.updates_per_step * seeds
         update_s, env_s = updates * dot_s, tc.chunk_steps * worlds / env_rate
         roofline_s, trained_s = update_s + env_s, update_s + timed["no_update_chunk_s"]
@@ -306,16 +305,6 @@ def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
             updates_per_s=updates / timed["chunk_s"], env_steps_per_s=tc.chunk_steps * worlds / timed["chunk_s"],
             run_train_s_projected=tc.num_chunks * timed["chunk_s"], run_train_s_at_roofline=tc.num_chunks * roofline_s)
     return out
-
-
-def _parse_seed_counts(text: str) -> list[int]:
-    try:
-        counts = [int(c) for c in str(text).split(",") if c.strip()]
-    except ValueError:
-        counts = []
-    if not counts or any(c < 1 for c in counts):
-        raise ValueError(f"--roofline-seeds must be comma-separated positive integers, got {text!r}")
-    return counts
 
 
 def _make_twin(config):
@@ -353,13 +342,24 @@ def _time_sb3(config, steps: int, repeats: int) -> dict:
             "env": f"{type(env).__module__}.{type(env).__name__}"}
 
 
-def run_train_benchmark(args: argparse.Namespace) -> dict:
-    import jax
+def _roofline_run(args: argparse.Namespace):
+    """(config, seed counts) of the batched-trainer section, validated."""
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.config import load_config, shipped_config
+    from mjx_protamer.experiments.bench_env import parse_positive_ints
+    from mjx_protamer.experiments.env_factory import with_resolved_backend
 
+    counts = parse_positive_ints(args.roofline_seeds, "--roofline-seeds")
+    path = args.roofline_config or shipped_config("pretrain.yaml")
+    return with_resolved_backend(load_config(PretrainConfig, path, args.roofline_set), announce=False), counts
+
+
+def run_train_benchmark(args: argparse.Namespace) -> dict:
     from mjx_protamer.experiments.bench_env import _bench_env
     from mjx_protamer.experiments.env_factory import make_env, resolve_backend
     from mjx_protamer.experiments.machine import describe
 
+    roofline = None if getattr(args, "skip_roofline", False) else _roofline_run(args)  # bad input: before any work
     single = _config(args.env, 1, args.steps)
     env = make_env(single)
     jax_single = _time_jax(env, single, args.repeats)
@@ -415,15 +415,8 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
         rates = result["batched_steps_per_s"]
         result["ratio_batched_native_vs_mjx"] = (rates["native"] / rates["mjx"]
                                                  if {"native", "mjx"} <= rates.keys() else None)
-    if not getattr(args, "skip_roofline", False):
-        from mjx_protamer.agents.ddpg.config import PretrainConfig
-        from mjx_protamer.config import load_config
-        from mjx_protamer.experiments.env_factory import with_resolved_backend
-
-        counts = _parse_seed_counts(args.roofline_seeds)
-        config = with_resolved_backend(load_config(PretrainConfig, args.roofline_config, args.roofline_set),
-                                       announce=False)
-        result["batched_trainer"] = batched_roofline(config, counts, args.roofline_chunks, args.repeats)
+    if roofline is not None:
+        result["batched_trainer"] = batched_roofline(*roofline, args.roofline_chunks, args.repeats)
     if not args.skip_sb3:
         sb3 = _time_sb3(single, args.sb3_steps, args.repeats)
         result.update(sb3_steps_per_s=sb3["median"], sb3_runs=sb3["runs"], sb3_torch_threads=sb3["torch_threads"],

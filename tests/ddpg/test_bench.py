@@ -101,3 +101,14 @@ def test_batched_roofline_reports_one_and_vmapped_seeds(tmp_path):
         assert s["roofline_trained_worlds_chunk_s"] == pytest.approx(s["roofline_update_s"] + s["no_update_chunk_s"])
         assert s["updates_per_s"] * s["chunk_s"] == pytest.approx(10 * 2 * n)
         assert s["run_train_s_projected"] == pytest.approx(config.train.num_chunks * s["chunk_s"])
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["bench", "train", "--env", "toy", "--skip-sb3", "--roofline-seeds", "0"], "--roofline-seeds must be"),
+    (["bench", "env", "--batch-sizes", "1,x"], "--batch-sizes must be")])
+def test_bench_refuses_bad_counts_in_one_line_before_any_work(argv, says, capsys):
+    from mjx_protamer.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0]
