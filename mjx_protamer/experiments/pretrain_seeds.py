@@ -102,14 +102,14 @@ def _train_seed(config, out: Path, seed: int, index: int, resume: bool, progress
         if resume and (where / "eval.json").is_file():
             _check_kept_config(where, cfg)
             print(f"[seed {seed}] kept from {where} (finished)", flush=True)
-            return _summary(seed, index, json.loads((where / "eval.json").read_text()), None)
+            return _summary(seed, index, json.loads((where / "eval.json").read_text()), None, None)
         from mjx_protamer.experiments.pretrain import run_pretrain
 
         t0 = time.perf_counter()
         print(f"[seed {seed}] training into {where}", flush=True)
         result = run_pretrain(cfg, where, resume=resume and bool(checkpoints.available_steps(where / "checkpoints")),
                               progress=progress, feedback=feedback)
-        return _summary(seed, index, result["eval"], time.perf_counter() - t0)
+        return _summary(seed, index, result["eval"], time.perf_counter() - t0, result["train_wall_s"])
 
 
 def _check_kept_config(where: Path, cfg) -> None:
@@ -122,10 +122,13 @@ def _check_kept_config(where: Path, cfg) -> None:
                         lambda path: read_run_config(path.parent))
 
 
-def _summary(seed: int, process: int, ev: dict, wall_s: float | None) -> dict:
-    """What seeds.json says of a seed (JSON-able: it travels to process 0). `wall_s` None: kept from before."""
+def _summary(seed: int, process: int, ev: dict, wall_s: float | None, train_wall_s: float | None) -> dict:
+    """What seeds.json says of a seed (JSON-able: it travels to process 0). `wall_s`: the seed's whole run here
+    (set-up, compile, training, test episodes), `train_wall_s` its chunk loop (the runner's: the first chunk
+    pays the compile); both None for a seed kept from before."""
     return {"seed": seed, "dir": seed_dir(".", seed).name, "process": process, "kept": wall_s is None,
-            "wall_s": wall_s, "test": {m: ev.get(m) for m in METRICS}, "episodes": ev.get("episodes")}
+            "wall_s": wall_s, "train_wall_s": train_wall_s, "test": {m: ev.get(m) for m in METRICS},
+            "episodes": ev.get("episodes")}
 
 
 def write_summary(out: Path, runs: list[dict], layout: dict, wall_s: float) -> dict:
