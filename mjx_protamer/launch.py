@@ -1,11 +1,12 @@
 """`protamer launch`: N local processes of one protamer command joined in a `jax.distributed` job.
 
 The launcher picks a free coordinator port on 127.0.0.1 (or checks the one given), starts N processes of
-`python -m mjx_protamer.cli COMMAND --coordinator 127.0.0.1:P --processes N --process-id K`, forwards every
-line they print prefixed with `[K]`, and waits. When a process dies or exits non-zero, the others are stopped
-(SIGTERM, then SIGKILL after `grace_s`) and the launch fails with one line naming the process, how it ended and
-its last line. Pure Python (no JAX): the processes import it. On SLURM or Open MPI the scheduler starts the
-processes instead (`--distributed`; scripts/table2_slurm.sbatch).
+`python -m mjx_protamer.cli COMMAND --coordinator 127.0.0.1:P --processes N --process-id K` (COMMAND:
+`reproduce table2 ...` or `pretrain --seeds N ...`), forwards every line they print prefixed with `[K]`, and
+waits. When a process dies or exits non-zero, the others are stopped (SIGTERM, then SIGKILL after `grace_s`) and
+the launch fails with one line naming the process, how it ended and its last line. Pure Python (no JAX): the
+processes import it. On SLURM or Open MPI the scheduler starts the processes instead (`--distributed`;
+scripts/table2_slurm.sbatch, scripts/pretrain_slurm.sbatch).
 """
 
 from __future__ import annotations
@@ -67,11 +68,15 @@ def prepare(command: list[str]) -> list[str]:
         lines = [x for x in err.getvalue().splitlines() if x.strip()]
         why = lines[-1].removeprefix("protamer: error: ") if lines else "it does not parse"
         raise ConfigError(f"the command after -- is not a protamer command line: {why}") from None
+    named = args.experiment if command[0] == "reproduce" else command[0]  # table2, pretrain, eval, ...
     if not hasattr(args, "coordinator"):
-        raise ConfigError(f"`protamer {' '.join(command[:2])}` does not run on several processes; "
-                          "`reproduce table2` does")
+        raise ConfigError(f"`protamer {' '.join(command[:2]) if command[0] == 'reproduce' else command[0]}` does "
+                          "not run on several processes; `reproduce table2` and `pretrain --seeds N` do")
+    if named == "pretrain" and args.seeds is None:
+        raise ConfigError("`protamer pretrain` runs on several processes with --seeds N (each process trains a "
+                          "block of the seeds)")
     if getattr(args, "out", None) is None:
-        command += ["--out", os.path.join("runs", time.strftime("table2-%Y%m%d-%H%M%S"))]
+        command += ["--out", os.path.join("runs", time.strftime(f"{named}-%Y%m%d-%H%M%S"))]
     return command
 
 
@@ -146,7 +151,7 @@ def launch(command: list[str], processes: int, port: int | None = None, grace_s:
                 raise DistributedError(
                     f"process {k} (pid {procs[k].pid}) {_how(ended[k][1])}{said}; stopped the other "
                     f"{stopped} process(es) in {took:.1f} s; what each process finished is kept in "
-                    f"OUT/process_<k>: the same command with --resume continues it")
+                    f"OUT: the same command with --resume continues it")
             if finished:
                 break
     except KeyboardInterrupt:

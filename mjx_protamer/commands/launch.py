@@ -9,13 +9,14 @@ import argparse
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "launch",
-        help="run a command as N local processes on jax.distributed (reproduce table2)",
+        help="run a command as N local processes on jax.distributed (reproduce table2, pretrain --seeds)",
         description="Starts N local processes of a protamer command that runs on several processes (reproduce "
-        "table2: each process trains a contiguous block of the seeds, process 0 writes the table), with a "
+        "table2: each process trains a share of the conditions and seeds, process 0 writes the table; pretrain "
+        "--seeds N: each process trains a contiguous block of the seeds, process 0 writes seeds.json), with a "
         "coordinator on 127.0.0.1; forwards their output prefixed by the process index. If a process dies or "
         "fails, the others are stopped (SIGTERM, then SIGKILL after --grace seconds) and the launch fails with one "
         "line naming it. On SLURM or Open MPI, run the command with --distributed under srun/mpirun instead "
-        "(scripts/table2_slurm.sbatch).",
+        "(scripts/table2_slurm.sbatch, scripts/pretrain_slurm.sbatch).",
         usage="protamer launch --processes N [--port P] [--grace S] -- COMMAND [ARGS ...]",
     )
     p.add_argument("--processes", required=True, help="how many processes (>= 1)")
@@ -27,11 +28,9 @@ def register(subparsers) -> None:
     p.set_defaults(handler=_launch)
 
 
-MAX_PROCESSES = 1024
-
-
 def _launch(args: argparse.Namespace) -> int:
     from mjx_protamer.cli_numbers import number, port
+    from mjx_protamer.commands.processes import MAX_PROCESSES
     from mjx_protamer.launch import launch
 
     processes = number("--processes", args.processes, 1, MAX_PROCESSES, integer=True)

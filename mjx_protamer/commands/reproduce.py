@@ -10,6 +10,8 @@ import sys
 import time
 from pathlib import Path
 
+from mjx_protamer.commands.processes import add_process_flags, processes_of
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -43,25 +45,15 @@ def register(subparsers) -> None:
     t.add_argument("--resume", action="store_true",
                    help="continue the run in --out: conditions already finished there are kept, not retrained")
     t.add_argument("--quiet", action="store_true", help="no per-chunk progress lines")
-    d = t.add_argument_group(
-        "several processes", "jax.distributed: each process trains a share of the conditions and seeds (--split) "
-        "into OUT/process_<k>; process 0 gathers the results and writes the table and figures into OUT. `protamer "
-        "launch` sets these for local processes; --resume continues every process")
-    d.add_argument("--distributed", action="store_true", help="join the job SLURM or Open MPI started (srun, mpirun): "
-                   "coordinator, process count and index detected (scripts/table2_slurm.sbatch)")
-    d.add_argument("--coordinator", default=None, metavar="HOST:PORT", help="process 0's address and a port for its "
-                   "coordinator (with --processes and --process-id)")
-    d.add_argument("--processes", default=None, metavar="N", help="how many processes the job has")
-    d.add_argument("--process-id", default=None, metavar="K", help="this process's index, 0..N-1")
+    d = add_process_flags(t, "jax.distributed: each process trains a share of the conditions and seeds (--split) into "
+                          "OUT/process_<k>; process 0 gathers the results and writes the table and figures into OUT. "
+                          "`protamer launch` sets these for local processes; --resume continues every process",
+                          "scripts/table2_slurm.sbatch")
     d.add_argument("--split", choices=("both", "seeds", "conditions"), default=None,
                    help="how the processes share the work: both (default): the conditions in gcd(N, conditions) "
                    "groups, the seeds in blocks for the rest (2 processes, 4 conditions: 2 conditions each, all "
                    "seeds); seeds: every condition on a block of the seeds; conditions: a group of the conditions on "
                    "all the seeds. A process with all the seeds gives bit for bit one process's results")
-    d.add_argument("--join-timeout", default=300, metavar="S", help="seconds for every process to join, else each "
-                   "stops with one line (default 300)")
-    d.add_argument("--heartbeat-timeout", default=100, metavar="S", help="seconds after which a silent process "
-                   "counts as dead and the others stop (default 100)")
     t.set_defaults(handler=_table2)
     r = sub.add_parser(
         "rescore",
@@ -133,7 +125,11 @@ def _table2(args: argparse.Namespace) -> int:
     own = ("table2.json",) + tuple(f"condition_{c.name}.json" for c in cfg.conditions)
     from mjx_protamer.outdir import claimed
 
-    spec = _processes(args)
+    spec = processes_of(args)
+    if spec is None and args.split is not None:
+        from mjx_protamer.config import ConfigError
+        raise ConfigError("--split shares the work of several processes; give it with protamer launch, "
+                          "--distributed or --coordinator")
     if spec is not None:
         return _table2_processes(args, cfg, spec, own)
     if args.resume and (out / "processes.json").is_file():
@@ -151,37 +147,6 @@ def _table2(args: argparse.Namespace) -> int:
             raise _table2_write_failed(e, out, cfg) from None
     _print_table2(result, cfg)
     return 0
-
-
-def _processes(args: argparse.Namespace):
-    """The jax.distributed job this process joins (experiments/distributed.py), or None for one process."""
-    from mjx_protamer.cli_numbers import address, number
-    from mjx_protamer.config import ConfigError
-
-    explicit = {"--coordinator": args.coordinator, "--processes": args.processes, "--process-id": args.process_id}
-    given = [k for k, v in explicit.items() if v is not None]
-    if not given and not args.distributed:
-        if args.split is not None:
-            raise ConfigError("--split shares the work of several processes; give it with protamer launch, "
-                              "--distributed or --coordinator")
-        return None
-    if args.distributed and given:
-        raise ConfigError(f"--distributed detects the job from SLURM or Open MPI; leave out {given[0]}, or leave "
-                          "out --distributed and give --coordinator, --processes and --process-id")
-    if given and len(given) < 3:
-        missing = [k for k in explicit if k not in given]
-        raise ConfigError(f"{given[0]} needs {' and '.join(missing)} too")
-    if args.out is None:
-        raise ConfigError("--out is needed on several processes: every process must name the same directory")
-    from mjx_protamer.experiments.distributed import Processes
-
-    join_s = number("--join-timeout", args.join_timeout, 1, 86_400, integer=True)
-    heartbeat_s = number("--heartbeat-timeout", args.heartbeat_timeout, 1, 86_400, integer=True)
-    if args.distributed:
-        return Processes(join_timeout_s=join_s, heartbeat_timeout_s=heartbeat_s)
-    count = number("--processes", args.processes, 1, 1024, integer=True)
-    return Processes(address("--coordinator", args.coordinator), count,
-                     number("--process-id", args.process_id, 0, count - 1, integer=True), join_s, heartbeat_s)
 
 
 def _table2_processes(args: argparse.Namespace, cfg, spec, own) -> int:

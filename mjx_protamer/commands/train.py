@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+from mjx_protamer.commands.processes import add_process_flags, processes_of, several
 from mjx_protamer.compile_cache import enable as enable_compile_cache
 
 
@@ -17,7 +18,8 @@ def register(subparsers) -> None:
         "pretrain",
         help="train the self-touch policy with batched pure-JAX DDPG",
         description="Batched DDPG pretraining. Writes a checkpoint, a CSV, TensorBoard logs, a training-curve "
-        "plot and the test metrics into --out. The built-in default finishes in a few minutes on 2 CPU cores.",
+        "plot and the test metrics into --out. The built-in default finishes in a few minutes on 2 CPU cores. With "
+        "--seeds N: seeds 0..N-1, each such a run in OUT/seed_<k>, on one process or several (protamer launch).",
     )
     p.add_argument("--config", type=Path, default=None,
                    help="YAML config (default: the built-in batched default, configs/pretrain.yaml)")
@@ -38,6 +40,13 @@ def register(subparsers) -> None:
                    "credit, reward model; default: configs/feedback_KIND.yaml's) and `batched` section; its "
                    "`pretrain` section is used only without --config; `session` and `coach` (a live session's) are "
                    "checked, unused. --set feedback.X=... / batched.X=... override it")
+    p.add_argument("--seeds", default=None, metavar="N", help="train seeds 0..N-1 one after another, each into "
+                   "OUT/seed_<k> (the run `--set train.seed=k --out OUT/seed_<k>` gives), and write their test "
+                   "metrics with means and 95%% intervals into OUT/seeds.json and seeds.md; --resume keeps the "
+                   "finished seeds")
+    add_process_flags(p, "jax.distributed, with --seeds: each process trains a contiguous block of the seeds into "
+                      "OUT/seed_<k>; process 0 writes seeds.json/seeds.md. `protamer launch` sets these for local "
+                      "processes; --resume continues every process", "scripts/pretrain_slurm.sbatch")
     p.set_defaults(handler=_pretrain)
 
     e = subparsers.add_parser(
@@ -58,6 +67,7 @@ def register(subparsers) -> None:
 
 
 MAX_EPISODES = 10_000  # test episodes of one eval or render: each is a whole rollout held in memory
+MAX_SEEDS = 100_000  # --seeds N: trained one after another, so only time bounds it
 
 
 # `--set` keys of a run's other sections (mjx_protamer/human/feedback_config.py FeedbackRunConfig); the rest are
@@ -71,6 +81,17 @@ def _pretrain(args: argparse.Namespace) -> int:
 
     if args.resume and args.out is None:
         raise ConfigError("--resume needs --out, the run directory to continue")
+    seeds = None
+    if args.seeds is not None:
+        from mjx_protamer.cli_numbers import number
+        from mjx_protamer.experiments.pretrain_seeds import check_seed_overrides
+
+        seeds = number("--seeds", args.seeds, 1, MAX_SEEDS, integer=True)
+        check_seed_overrides(args.overrides)
+    elif several(args):
+        raise ConfigError("several processes train a pretrain run's seeds: give --seeds N (each process trains a "
+                          "block of seeds 0..N-1)")
+    spec = processes_of(args)
     if args.backend is not None:
         args.overrides = list(args.overrides) + [f"env.backend={args.backend}"]
     run_overrides = [o for o in args.overrides if o.split("=", 1)[0].split(".")[0].strip() in RUN_SECTIONS]
@@ -85,6 +106,8 @@ def _pretrain(args: argparse.Namespace) -> int:
     else:
         config = load_config(PretrainConfig, args.config, overrides)
     out = args.out or Path("runs") / time.strftime("pretrain-%Y%m%d-%H%M%S")
+    if seeds is not None:
+        return _pretrain_seeds(config, out, seeds, spec, args.resume, not args.no_progress, feedback)
     from mjx_protamer.outdir import claimed
 
     # --out is checked, created and locked before JAX starts, and stays locked until the run ends
@@ -107,6 +130,27 @@ def _pretrain(args: argparse.Namespace) -> int:
 
 
 KIND = "pretrain"  # what outdir.claim records in a pretrain run's directory
+
+
+def _pretrain_seeds(config, out: Path, seeds: int, spec, resume: bool, progress: bool, feedback) -> int:
+    """`pretrain --seeds N` on this process (one, or one of a jax.distributed job); process 0 prints seeds.md."""
+    from mjx_protamer.errors import write_failed
+    from mjx_protamer.experiments.pretrain_seeds import run_pretrain_seeds
+
+    enable_compile_cache()
+    try:
+        summary = run_pretrain_seeds(config, out, seeds, spec, resume=resume, progress=progress, feedback=feedback,
+                                     seed_kind=KIND)
+    except OSError as e:  # a full disk, no permission: one line, and what --resume keeps
+        raise write_failed(e, out, f"the finished seeds are kept in {out}/seed_<k>, an unfinished one has its last "
+                           "checkpoint", "continue with the same command and --resume") from None
+    if summary is None:  # not process 0: its seeds are in the summary process 0 writes
+        return 0
+    print(Path(summary["seeds_md"]).read_text())
+    for key in ("seeds_json", "seeds_md"):
+        print(f"{key:<10} {summary[key]}")
+    print(f"wall time  {summary['wall_s']:.0f} s")
+    return 0
 
 
 def _feedback_setup(spec: str, feedback_config: Path | None, pretrain_config: Path | None,

@@ -307,7 +307,12 @@ def _empty(x):
 
 
 def _abstract(x):
+    # A `like` without a placement (an eval_shape) restores onto this process's first device rather than onto the
+    # device the checkpoint names: a run saved by process k of a jax.distributed job names the job's global device
+    # (cpu:2048 for process 1), which a one-process `eval` or `finetune` of that run does not have.
     sharding = getattr(x, "sharding", None)
+    if sharding is None:
+        sharding = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
     return jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding)
 
 

@@ -1,4 +1,8 @@
-"""Table II on several processes (and hosts) with `jax.distributed`.
+"""Table II and pretraining seeds on several processes (and hosts) with `jax.distributed`.
+
+What both share: `join` the job, process 0 claims OUT first (`claimed_by_process_0`, the work's layout in
+`processes.json`: `check_layout`), each process trains its share alone (`alone`), the shares go to process 0
+(`hand_to_process_0`); `experiments/pretrain_seeds.py` runs the pretraining seeds on them. For Table II:
 
 Every process joins one `jax.distributed` job (process 0 runs its coordinator), trains its share of the work
 (`work_split`: a group of the conditions on a block of the seeds) with the one-process code
@@ -196,13 +200,48 @@ def process_dir(out: Path, index: int) -> Path:
     return Path(out) / f"process_{index}"
 
 
+LAYOUT = "processes.json"  # in OUT: how the work was split among the processes (`check_layout`)
+
+
+@contextlib.contextmanager
+def claimed_by_process_0(out: Path, index: int, kind: str, resume: bool, own: tuple[str, ...] = (),
+                         check=lambda: None):
+    """`out` claimed (outdir.claimed) for the block by process 0, and `check()` passed (a resumed run's layout),
+    before any other process writes into it: the others wait for process 0's word and stop with one line where it
+    refused. Outside a jax.distributed job (`join`), the claim and the check of one process."""
+    from mjx_protamer.errors import OutputDirError
+    from mjx_protamer.outdir import claimed
+
+    with contextlib.ExitStack() as stack:
+        if index == 0:
+            try:
+                stack.enter_context(claimed(out, kind, resume=resume, own=own))
+                check()
+            except (ConfigError, OutputDirError):
+                if _joined:
+                    broadcast_ok(False, "telling the others that --out was refused")
+                raise
+            if _joined:
+                broadcast_ok(True, "telling the others that --out is ready")
+        elif not broadcast_ok(False, "waiting for process 0 to claim --out"):
+            raise OutputDirError(f"process {index}: process 0 refused --out {out} (its line says why)")
+        yield
+
+
+def hand_to_process_0(work: str, share) -> list:
+    """Every process's JSON-able `share` of the `work` (in process order, on every process), once every process
+    has finished its own: the coordination service's barrier waits as long as the slowest share takes (a dead
+    process ends the wait through the heartbeat), so the collective after it never waits long."""
+    _collective(lambda: _barrier(f"protamer/{work}/trained", TRAINED_BARRIER_S), "waiting for the other shares")
+    return gather_json(share)
+
+
 def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resume: bool = False,
                          claim_kind: str = "table2", own: tuple[str, ...] = (), split: str = "both") -> dict | None:
     """This process's part of a table2 run on `spec`'s job: join, claim `out` (process 0) and `out/process_<k>`,
     train its share of the conditions and seeds (`work_split.split_work`), hand the results to process 0.
     Process 0 returns `write_table2`'s result for the whole run (written into `out`), the others None. Raises
     ConfigError / OutputDirError / DistributedError with one line."""
-    from mjx_protamer.errors import OutputDirError
     from mjx_protamer.experiments import table2 as T2
     from mjx_protamer.experiments.table2 import pool_shares
     from mjx_protamer.outdir import claimed
@@ -218,17 +257,8 @@ def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resum
     # The pooled reward-model score of a seed needs every condition's reward models and test states: where a
     # process trains only some conditions, process 0 computes it from everyone's (gathered after training)
     pool_at_0 = any(len(s.conditions) < len(names) for s in shares)
-    with contextlib.ExitStack() as stack:
-        if index == 0:  # the run's directory first; the others make theirs in it only after that
-            try:
-                stack.enter_context(claimed(out, claim_kind, resume=resume, own=own))
-                _check_layout(out / "processes.json", layout, resume, names)
-            except (ConfigError, OutputDirError):
-                broadcast_ok(False, "telling the others that --out was refused")
-                raise
-            broadcast_ok(True, "telling the others that --out is ready")
-        elif not broadcast_ok(False, "waiting for process 0 to claim --out"):
-            raise OutputDirError(f"process {index}: process 0 refused --out {out} (its line says why)")
+    with claimed_by_process_0(out, index, claim_kind, resume, own,
+                              lambda: _check_layout(out / LAYOUT, layout, resume, names)):
         mine = process_dir(out, index)
         if progress:
             print(f"process {index}/{count}: conditions {list(share.conditions)}, seeds {list(share.seeds)} into "
@@ -245,8 +275,7 @@ def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resum
             # a process whose directory holds no run yet (it had not started) starts its share now
             trained = T2.train_table2(mine_cfg, mine, progress, resume and (mine / "config.yaml").is_file(),
                                       pooled=keep_for_process_0 if pool_at_0 else None)
-        _collective(lambda: _barrier("protamer/table2/trained", TRAINED_BARRIER_S), "waiting for the other shares")
-        parts = [T2.Trained(**p) for p in gather_json(dataclasses.asdict(trained))]
+        parts = [T2.Trained(**p) for p in hand_to_process_0("table2", dataclasses.asdict(trained))]
         blobs = gather_bytes(kept["blob"]) if pool_at_0 else None
         if index != 0:
             if progress:
@@ -279,23 +308,33 @@ def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: fl
 
 
 def _check_layout(path: Path, layout: dict, resume: bool, names: list[str]) -> None:
-    """processes.json says how the work was split; a resumed run must split it the same way (and a run of one
-    process is continued by one process)."""
-    from mjx_protamer.atomic import write_atomic
-
+    """A table2 run's `check_layout`; a run of one process (which writes no processes.json) is continued by one
+    process."""
     if resume and not path.is_file() and any(path.parent.glob("condition_*.json")):
         raise ConfigError(f"--resume: {path.parent} is a run of one process; continue it with one process (without "
                           "protamer launch, --distributed or --coordinator)")
+
+    def as_today(before: dict) -> dict:  # a run from before --split split the seeds only
+        return {"count": before["count"], "split": before.get("split", "seeds"),
+                "condition_groups": before.get("condition_groups", [names] * before["count"]),
+                "seed_blocks": before["seed_blocks"]}
+
+    check_layout(path, layout, resume, as_today, lambda before: (
+        f"--resume: {path.parent} was run on {before['count']} process(es) with --split {before['split']} "
+        f"(conditions {before['condition_groups']}, seeds {before['seed_blocks']}); continue it with the same "
+        "--processes, --split and --seeds"))
+
+
+def check_layout(path: Path, layout: dict, resume: bool, as_today, refusal) -> None:
+    """`path` (processes.json) records how the work was split among the processes (`layout`); a resumed run must
+    split it the same way, else ConfigError(`refusal(recorded layout)`). `as_today`: a recorded layout as this
+    code writes it (files of older versions)."""
+    from mjx_protamer.atomic import write_atomic
+
     if resume and path.is_file():
-        before = json.loads(path.read_text())
-        # a run from before --split split the seeds only
-        before = {"count": before["count"], "split": before.get("split", "seeds"),
-                  "condition_groups": before.get("condition_groups", [names] * before["count"]),
-                  "seed_blocks": before["seed_blocks"]}
+        before = as_today(json.loads(path.read_text()))
         if before != layout:
-            raise ConfigError(f"--resume: {path.parent} was run on {before['count']} process(es) with --split "
-                              f"{before['split']} (conditions {before['condition_groups']}, seeds "
-                              f"{before['seed_blocks']}); continue it with the same --processes, --split and --seeds")
+            raise ConfigError(refusal(before))
     write_atomic(path, json.dumps(layout))
 
 

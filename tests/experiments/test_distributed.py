@@ -100,7 +100,8 @@ def test_split_work_gives_each_process_one_rectangle_of_conditions_and_seeds():
                                                                                      "within 1..65535"),
     (["launch", "--processes", "2.5", "--", "reproduce", "table2"], "--processes must be a whole number"),
     (["launch", "--processes", "2"], "give the command after --"),
-    (["launch", "--processes", "2", "--", "pretrain"], "`protamer pretrain` does not run on several processes"),
+    (["launch", "--processes", "2", "--", "reproduce", "rescore", "x"], "`protamer reproduce rescore` does not run "
+                                                                        "on several processes"),
     (["launch", "--processes", "2", "--", "reproduce", "table2", "--process-id", "1"], "leave --process-id to protamer"),
     (["launch", "--processes", "2", "--", "reproduce", "table2", "--no-such-flag"],
      "not a protamer command line: unrecognized arguments: --no-such-flag"),
@@ -185,7 +186,7 @@ def test_a_killed_process_stops_the_others_with_one_line(config, tmp_path):
     last = err.strip().splitlines()[-1]
     m = re.fullmatch(rf"protamer: distributed run error: process 1 \(pid {pids[1]}\) was killed by signal 9 "
                      r"\(SIGKILL\); stopped the other 1 process\(es\) in (\d+\.\d) s; what each process finished is "
-                     r"kept in OUT/process_<k>: the same command with --resume continues it", last)
+                     r"kept in OUT: the same command with --resume continues it", last)
     assert m, last
     assert float(m[1]) < 5  # the survivor ended on SIGTERM, before --grace's SIGKILL (JAX's preemption service is off)
     assert took < 5  # the launcher looks every second
@@ -323,7 +324,8 @@ def test_the_sbatch_example_runs_a_valid_protamer_command(tmp_path):
     """scripts/table2_slurm.sbatch parses (bash -n), and what it hands srun is a protamer command line that joins
     the SLURM job (--distributed) with the run's settings: run under a stand-in srun that records it."""
     from mjx_protamer.cli import build_parser
-    from mjx_protamer.commands.reproduce import _processes, _table2
+    from mjx_protamer.commands.processes import processes_of
+    from mjx_protamer.commands.reproduce import _table2
     from mjx_protamer.experiments.distributed import Processes
     from mjx_protamer.experiments.table2 import load_table2_config
 
@@ -343,7 +345,7 @@ def test_the_sbatch_example_runs_a_valid_protamer_command(tmp_path):
     assert argv[:2] == ["--kill-on-bad-exit=1", ".venv/bin/protamer"]
     args = build_parser().parse_args(argv[2:])
     assert args.handler is _table2 and args.distributed
-    assert _processes(args) == Processes(coordinator=None, count=None, index=None, join_timeout_s=300,
+    assert processes_of(args) == Processes(coordinator=None, count=None, index=None, join_timeout_s=300,
                                          heartbeat_timeout_s=120)
     assert args.out == Path("runs/table2-slurm-77")
     cfg = load_table2_config(args.config, args.overrides, int(args.seeds))
