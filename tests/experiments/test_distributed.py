@@ -18,6 +18,7 @@ import pytest
 import yaml
 
 from mjx_protamer.cli import main
+from multiprocess_checks import assert_refused_in_one_line, srun_argv_of
 from mjx_protamer.experiments.work_split import Share, seed_blocks, split_work
 
 from toy_feedback import toy_feedback_config
@@ -120,10 +121,7 @@ def test_split_work_gives_each_process_one_rectangle_of_conditions_and_seeds():
 ])
 def test_bad_input_is_one_line(argv, says, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # nothing is written anywhere
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("protamer: configuration error: ") and says in err[0], err
-    assert list(tmp_path.iterdir()) == []
+    assert_refused_in_one_line(argv, says, capsys, tmp_path)
 
 
 def test_port_in_use_is_refused(capsys):
@@ -329,21 +327,8 @@ def test_the_sbatch_example_runs_a_valid_protamer_command(tmp_path):
     from mjx_protamer.experiments.distributed import Processes
     from mjx_protamer.experiments.table2 import load_table2_config
 
-    script = ROOT / "scripts" / "table2_slurm.sbatch"
-    subprocess.run(["bash", "-n", str(script)], check=True)
-    assert "#SBATCH --ntasks-per-node=1" in script.read_text()
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    (bin_dir / "srun").write_text('#!/bin/bash\nprintf "%s\\n" "$@" > "$SRUN_ARGV"\n')
-    (bin_dir / "srun").chmod(0o755)
-    env = {k: v for k, v in os.environ.items() if k not in ("SEEDS", "OUT", "PROTAMER_DIR")}
-    env.update(PATH=f"{bin_dir}:{env['PATH']}", SRUN_ARGV=str(tmp_path / "argv"), SLURM_JOB_ID="77",
-               SLURM_SUBMIT_DIR=str(ROOT))
-    subprocess.run(["bash", str(script), "--set", "pretrain.train.total_env_steps=64000"], env=env, check=True,
-                   cwd=tmp_path, timeout=60)
-    argv = (tmp_path / "argv").read_text().splitlines()
-    assert argv[:2] == ["--kill-on-bad-exit=1", ".venv/bin/protamer"]
-    args = build_parser().parse_args(argv[2:])
+    argv = srun_argv_of("table2_slurm.sbatch", tmp_path, ["--set", "pretrain.train.total_env_steps=64000"])
+    args = build_parser().parse_args(argv)
     assert args.handler is _table2 and args.distributed
     assert processes_of(args) == Processes(coordinator=None, count=None, index=None, join_timeout_s=300,
                                          heartbeat_timeout_s=120)

@@ -5,7 +5,6 @@ is conftest.py's `toy_run` (its shapes: the persistent compile cache serves both
 chunk."""
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -14,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from mjx_protamer.cli import main
+from multiprocess_checks import assert_refused_in_one_line, srun_argv_of
 
 ROOT = Path(__file__).resolve().parents[2]
 SETS = [x for kv in ("env_name=toy", "ddpg.actor_hidden=[16]", "ddpg.critic_hidden=[16,16]", "train.num_envs=4",
@@ -123,10 +123,7 @@ def test_resume_keeps_a_finished_seed_and_finishes_the_others(one_process, tmp_p
 ])
 def test_bad_input_is_one_line(argv, says, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # nothing is written anywhere
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("protamer: configuration error: ") and says in err[0], err
-    assert list(tmp_path.iterdir()) == []
+    assert_refused_in_one_line(argv, says, capsys, tmp_path)
 
 
 def test_the_sbatch_example_runs_a_valid_pretrain_command(tmp_path):
@@ -137,21 +134,8 @@ def test_the_sbatch_example_runs_a_valid_pretrain_command(tmp_path):
     from mjx_protamer.commands.train import _pretrain
     from mjx_protamer.experiments.distributed import Processes
 
-    script = ROOT / "scripts" / "pretrain_slurm.sbatch"
-    subprocess.run(["bash", "-n", str(script)], check=True)
-    assert "#SBATCH --ntasks-per-node=1" in script.read_text()
-    bin_dir = tmp_path / "bin"
-    bin_dir.mkdir()
-    (bin_dir / "srun").write_text('#!/bin/bash\nprintf "%s\\n" "$@" > "$SRUN_ARGV"\n')
-    (bin_dir / "srun").chmod(0o755)
-    env = {k: v for k, v in os.environ.items() if k not in ("SEEDS", "OUT", "PROTAMER_DIR")}
-    env.update(PATH=f"{bin_dir}:{env['PATH']}", SRUN_ARGV=str(tmp_path / "argv"), SLURM_JOB_ID="77",
-               SLURM_SUBMIT_DIR=str(ROOT), SEEDS="6")
-    subprocess.run(["bash", str(script), "--set", "train.total_env_steps=64000"], env=env, check=True, cwd=tmp_path,
-                   timeout=60)
-    argv = (tmp_path / "argv").read_text().splitlines()
-    assert argv[:2] == ["--kill-on-bad-exit=1", ".venv/bin/protamer"]
-    args = build_parser().parse_args(argv[2:])
+    argv = srun_argv_of("pretrain_slurm.sbatch", tmp_path, ["--set", "train.total_env_steps=64000"], SEEDS="6")
+    args = build_parser().parse_args(argv)
     assert args.handler is _pretrain and args.distributed and args.seeds == "6"
     assert processes_of(args) == Processes(coordinator=None, count=None, index=None, join_timeout_s=300,
                                            heartbeat_timeout_s=120)
