@@ -26,6 +26,11 @@
    `updates_per_feedback` minibatch steps on the chunk's new rows plus `chunk_steps // replay_every`
    replay minibatches (weighted squared loss, Adam, `batched.reward_model_updates`).
 
+With a silent teacher (`teach` 0: DDPG alone), steps 3 and 4 are skipped (`lax.cond` on a value every seed
+shares, so vmapped seeds skip it too): no row would have weight and no update would be live, so every output
+is the same, and DDPG's condition of Table II costs about what plain DDPG costs (measured in
+docs/environment.md, "Table II's wall time").
+
 `collect_chunk` is the same chunk with a `ChunkTrace` beside its outputs: the steps the teacher judged, the
 rule's signals, the teacher's output per step and the rows written to the feedback ring (the DDPG chunk's
 `collect_chunk` and its transitions, one level up). `chunk` is `collect_chunk` with the trace dropped: the
@@ -237,40 +242,55 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
                                        active=active)
         value, valid, about, score = out["value"], out["valid"], out["about"], out["score"]
 
-        # credit: K lags per event drawn by weight; (obs, action) from the history (earlier chunks) or the chunk
-        rel, b_idx, ok, target, n_events = draw_credited_steps(value, valid, fp.lag_w, local_key(k_lag), E, K)
-        ok = ok & (it0 + rel >= 0)  # no step before the run's first
         seen_obs = jnp.concatenate([fs.history.obs, obs])  # (H + T, local_B, ...): step rel is row H + rel
         seen_act = jnp.concatenate([fs.history.action, action])
-        c_obs = seen_obs[H + rel, b_idx[:, None]].reshape(E * K, obs_size)
-        c_act = seen_act[H + rel, b_idx[:, None]].reshape(E * K, act_size)
-        w = ok.astype(jnp.float32)
-        if fc.credit.posterior_temperature > 0:  # the model's agreement moves each event's weight among its rows
-            w = posterior_weights(jnp, w, target, apply(fs.rm_params, c_obs, c_act).reshape(E, K),
-                                  fc.credit.posterior_temperature)
-        w = w.reshape(-1)
-        h = target.reshape(-1)
         seen_arrived = jnp.concatenate([fs.history.arrived, valid])
         seen_watching = jnp.concatenate([fs.history.watching, out["watching"]])
-        if S:  # silent steps, labelled 0 (their own key: the event draws are the same with and without)
-            k_silent = jax.random.fold_in(local_key(k_lag), 1)
-            s_rel, s_b, s_ok, n_silent = draw_silent_steps(seen_arrived, active, fp.lag_w, k_silent, H, S,
-                                                           seen_watching if attention else None)
-            s_ok = s_ok & (it0 + s_rel >= 0)
-            # a silent step weighs silence_w events; an event's K rows weigh 1 each, a row stands for n_silent / S
-            s_w = s_ok * fp.silence_w * K * n_silent / S
-            c_obs = jnp.concatenate([c_obs, seen_obs[H + s_rel, s_b]])
-            c_act = jnp.concatenate([c_act, seen_act[H + s_rel, s_b]])
-            w = jnp.concatenate([w, s_w])  # rows of weight 0 never enter the ring
-            h = jnp.concatenate([h, jnp.zeros((S,))])
-        c_obs, c_act, w, h = gather(c_obs), gather(c_act), gather(w), gather(h)
-        ring = ring_add(fs.ring, c_obs, c_act, w, h)
-        p, o, losses, live = reward_model_updates(nets.fit, opt, fs.rm_params, fs.rm_opt_state, ring,
-                                                  (c_obs, c_act, w, h), k_fresh, n_fresh, n_replay,
-                                                  rmc.batch_size, rmc.replay_min_rows,
-                                                  rmc.balance_max if rmc.balance_signs else None,
-                                                  decay_scale(it0, tc.iterations, rmc.lr_decay_from,
-                                                              rmc.lr_final_fraction))
+
+        def learn(_):
+            # credit: K lags per event drawn by weight; (obs, action) from the history (earlier chunks) or the chunk
+            rel, b_idx, ok, target, n_events = draw_credited_steps(value, valid, fp.lag_w, local_key(k_lag), E, K)
+            ok = ok & (it0 + rel >= 0)  # no step before the run's first
+            c_obs = seen_obs[H + rel, b_idx[:, None]].reshape(E * K, obs_size)
+            c_act = seen_act[H + rel, b_idx[:, None]].reshape(E * K, act_size)
+            w = ok.astype(jnp.float32)
+            if fc.credit.posterior_temperature > 0:  # the model's agreement moves each event's weight among its rows
+                w = posterior_weights(jnp, w, target, apply(fs.rm_params, c_obs, c_act).reshape(E, K),
+                                      fc.credit.posterior_temperature)
+            w = w.reshape(-1)
+            h = target.reshape(-1)
+            if S:  # silent steps, labelled 0 (their own key: the event draws are the same with and without)
+                k_silent = jax.random.fold_in(local_key(k_lag), 1)
+                s_rel, s_b, s_ok, n_silent = draw_silent_steps(seen_arrived, active, fp.lag_w, k_silent, H, S,
+                                                               seen_watching if attention else None)
+                s_ok = s_ok & (it0 + s_rel >= 0)
+                # a silent step weighs silence_w events; an event's K rows weigh 1 each, a row stands for n_silent / S
+                s_w = s_ok * fp.silence_w * K * n_silent / S
+                c_obs = jnp.concatenate([c_obs, seen_obs[H + s_rel, s_b]])
+                c_act = jnp.concatenate([c_act, seen_act[H + s_rel, s_b]])
+                w = jnp.concatenate([w, s_w])  # rows of weight 0 never enter the ring
+                h = jnp.concatenate([h, jnp.zeros((S,))])
+            rows = CreditedRows(gather(c_obs), gather(c_act), gather(w), gather(h))
+            ring = ring_add(fs.ring, *rows)
+            p, o, losses, live = reward_model_updates(nets.fit, opt, fs.rm_params, fs.rm_opt_state, ring, rows,
+                                                      k_fresh, n_fresh, n_replay, rmc.batch_size,
+                                                      rmc.replay_min_rows,
+                                                      rmc.balance_max if rmc.balance_signs else None,
+                                                      decay_scale(it0, tc.iterations, rmc.lr_decay_from,
+                                                                  rmc.lr_final_fraction))
+            return rows, ring, p, o, losses, live, psum(jnp.sum(ok))
+
+        def silent_teacher(_):
+            # DDPG alone (teach 0): no event and no silent step has weight, so nothing enters the ring and no
+            # update of the reward model is live; skipping that work leaves every output the same, and the
+            # reward model untouched (the ring holds no row: a condition starts from `init`)
+            n, r = max(n_fresh + n_replay, 1), n_dev * (E * K + S)
+            rows = CreditedRows(jnp.zeros((r, obs_size)), jnp.zeros((r, act_size)), jnp.zeros((r,)), jnp.zeros((r,)))
+            return rows, fs.ring, fs.rm_params, fs.rm_opt_state, jnp.zeros((n,)), jnp.zeros((n,), bool), jnp.int32(0)
+
+        n_events = jnp.sum(valid)  # as `draw_credited_steps` counts and orders them
+        t_idx, b_idx = jnp.nonzero(valid, size=E, fill_value=0)
+        credited_rows, ring, p, o, losses, live, credited = jax.lax.cond(fp.teach > 0, learn, silent_teacher, None)
         n_live = jnp.sum(live)
 
         # diagnostics: r_hat on the chunk's steps (all envs), and how it tracks the hidden score
@@ -280,7 +300,6 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
         rc, scc = rh - rh.mean(), sc - sc.mean()
         corr = jnp.sum(rc * scc) / jnp.maximum(jnp.sqrt(jnp.sum(rc ** 2) * jnp.sum(scc ** 2)), 1e-12)
         used = psum(jnp.minimum(n_events, E))
-        credited = psum(jnp.sum(ok))
         pos = psum(jnp.sum(valid & (value > 0)))
         neg = psum(jnp.sum(valid & (value < 0)))
         n_all = psum(n_events)
@@ -295,14 +314,13 @@ def make_feedback_train(config, env, feedback, batched: BatchedFeedbackConfig | 
             r_hat_mean=rh.mean(), r_hat_std=rh.std(), r_hat_score_corr=corr,
             score_mean=sc.mean(), ring_size=ring.size.astype(jnp.float32),
             **{k: totals[i] for i, k in enumerate(TOTAL_NAMES)})
-        t_idx, _ = jnp.nonzero(valid, size=E, fill_value=0)
         present = jnp.arange(E) < n_events
         events = {"present": present, "arrival": it0 + t_idx,
                   "env": env_ids[b_idx], "value": value[t_idx, b_idx], "about": about[t_idx, b_idx]}
         history = CreditHistory(seen_obs[-H:], seen_act[-H:], seen_arrived[-H:], seen_watching[-H:])
         fs = fs.replace(teacher=teacher, rm_params=p, rm_opt_state=o, ring=ring, rng=rng, totals=totals,
                         history=history)
-        trace = ChunkTrace(obs, action, signals, out, CreditedRows(c_obs, c_act, w, h))
+        trace = ChunkTrace(obs, action, signals, out, credited_rows)
         return ts, fs, metrics, events, trace
 
     def chunk(ts, fs: FeedbackState, fp: FeedbackParams):

@@ -91,16 +91,19 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
     min_rows = min(replay_min_rows, ring.obs.shape[0])
     factors = (1.0, 1.0) if balance_max is None else sign_factors(jnp, ring.weight, ring.target, balance_max)
 
-    def step(carry, xs):
+    def step(fresh: bool, carry, xs):
+        # Fresh and replay steps are separate scans: a fresh step's draw among the new rows (a categorical
+        # over every row) is most of a step's cost, and a replay step never needs it.
         p, o = carry
-        k, fresh, on = xs
+        k, on = xs
         kf, kr = jax.random.split(k)
-        fi = jax.random.categorical(kf, jnp.where(weight > 0, 0.0, -1e30), shape=(batch_size,))
-        ri = jax.random.randint(kr, (batch_size,), 0, jnp.maximum(ring.size, 1))
-        bo = jnp.where(fresh, obs[fi], ring.obs[ri])
-        ba = jnp.where(fresh, action[fi], ring.action[ri])
-        bw = jnp.where(fresh, weight[fi], ring.weight[ri] * (ring.size >= min_rows))
-        bh = jnp.where(fresh, target[fi], ring.target[ri])
+        if fresh:
+            fi = jax.random.categorical(kf, jnp.where(weight > 0, 0.0, -1e30), shape=(batch_size,))
+            bo, ba, bw, bh = obs[fi], action[fi], weight[fi], target[fi]
+        else:
+            ri = jax.random.randint(kr, (batch_size,), 0, jnp.maximum(ring.size, 1))
+            bo, ba, bh = ring.obs[ri], ring.action[ri], ring.target[ri]
+            bw = ring.weight[ri] * (ring.size >= min_rows)
         bw = balanced_weight(jnp, factors, bw, bh)
         loss, g = jax.value_and_grad(weighted_loss)(p, apply, bo, ba, bw, bh)
         u, new_o = optimizer.update(g, o, p)
@@ -111,10 +114,15 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
         return (p, o), (loss, live)
 
     n = max(n_fresh + n_replay, 1)
-    fresh = jnp.arange(n) < max(n_fresh, n - n_replay)
+    n_f = max(n_fresh, n - n_replay)  # the first n_f steps are fresh
     on = jnp.ones((n,), bool) if fresh_count is None else (jnp.arange(n) >= n_fresh) | (jnp.arange(n) < fresh_count)
-    (params, opt_state), (losses, live) = jax.lax.scan(step, (params, opt_state),
-                                                        (jax.random.split(key, n), fresh, on))
+    keys = jax.random.split(key, n)
+    carry, (losses, live) = (params, opt_state), (jnp.zeros((0,)), jnp.zeros((0,), bool))
+    for fresh, part in ((True, slice(0, n_f)), (False, slice(n_f, n))):
+        if part.stop > part.start:
+            carry, (ls, lv) = jax.lax.scan(lambda c, xs, f=fresh: step(f, c, xs), carry, (keys[part], on[part]))
+            losses, live = jnp.concatenate([losses, ls]), jnp.concatenate([live, lv])
+    params, opt_state = carry
     return params, opt_state, losses, live
 
 

@@ -59,6 +59,10 @@ def test_gain_zero_is_plain_ddpg_bit_for_bit(setup):
         assert _equal({k: m[k] for k in mr}, mr)
     assert _equal(ts, ref)
     assert float(m["feedback_total"]) == 0 and float(m["credited_rows_total"]) == 0
+    # the reward model's work is skipped: it stays as `init` made it, and its ring empty
+    fresh = ft.init(3)
+    assert _equal((fs.rm_params, fs.rm_opt_state, fs.ring), (fresh.rm_params, fresh.rm_opt_state, fresh.ring))
+    assert float(m["rm_updates_total"]) == 0 and np.isnan(float(m["rm_loss"]))
 
 
 def test_credit_history_is_what_the_replay_holds(setup):

@@ -109,6 +109,33 @@ def test_reward_model_updates_fit_the_credited_targets_in_jit():
     jax.tree.map(lambda a, b: np.testing.assert_array_equal(a, b), same, params)
 
 
+def test_fresh_steps_draw_the_new_rows_and_replay_steps_the_ring():
+    """The first `n_fresh` steps learn the chunk's new rows only and the next `n_replay` the ring only (separate
+    scans, so a replay step never pays for the fresh rows' draw); `fresh_count` leaves the surplus fresh steps
+    idle and the replay steps live."""
+    apply = reward_fn((32,))
+    params = RewardMLP((32,)).init(jax.random.PRNGKey(0), jnp.zeros((1, 2)), jnp.zeros((1, 1)))
+    opt = optax.adam(1e-2)
+    new_obs = jax.random.normal(jax.random.PRNGKey(1), (64, 2)) + 3.0
+    old_obs = jax.random.normal(jax.random.PRNGKey(2), (64, 2)) - 3.0
+    act = jnp.zeros((64, 1))
+    rows = (new_obs, act, jnp.ones(64), jnp.ones(64))  # the new rows are praised
+    ring = ring_add(ring_init(256, 2, 1), old_obs, act, jnp.ones(64), -jnp.ones(64))  # the ring scolds
+    run = lambda n_fresh, n_replay, count=None: reward_model_updates(
+        apply, opt, params, opt.init(params), ring, rows, jax.random.PRNGKey(3), n_fresh, n_replay, 32, 64,
+        fresh_count=count)
+    fresh_only, replay_only = run(30, 0)[0], run(0, 30)[0]
+    assert float(apply(fresh_only, new_obs, act).mean()) > 0.5
+    assert float(apply(replay_only, old_obs, act).mean()) < -0.5
+    # replay alone never saw the praised rows, fresh alone never the scolded ones: both stay where they began
+    start = lambda o: float(apply(params, o, act).mean())
+    assert abs(float(apply(fresh_only, old_obs, act).mean()) - start(old_obs)) < abs(
+        float(apply(replay_only, old_obs, act).mean()) - start(old_obs))
+    _, _, losses, live = run(5, 3, jnp.int32(2))
+    assert losses.shape == (8,)
+    np.testing.assert_array_equal(np.asarray(live), [True, True, False, False, False, True, True, True])
+
+
 def test_balanced_updates_in_jit_weigh_rare_reproach_like_praise():
     """With `balance_max` the in-jit updates scale each row by its sign's factor over the ring: 1 scolded row per
     40 praised ones (overlapping clusters) ends rated lower than without, the praised cluster still high."""
