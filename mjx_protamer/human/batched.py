@@ -7,6 +7,11 @@ of step k - j for feedback arriving at step k. `draw_credited_steps` draws the c
 events; `FeedbackRing` is the 1e4-row feedback buffer in device memory; `reward_model_updates` takes the
 minibatch steps of the weighted squared loss. All pure and jittable: the reward-model params and optimiser
 state are carried in and out as arrays.
+
+Every draw is by inverse CDF (`jax.random.choice` with `p`: one uniform number per draw and a search in the
+cumulative weights), not Gumbel-max (`jax.random.categorical`: one Gumbel number per draw and candidate). In
+Table II's chunk the Gumbel numbers were 14M per seed, a third of the chunk's time (docs/environment.md,
+"Table II's wall time").
 """
 
 from __future__ import annotations
@@ -33,8 +38,7 @@ def draw_credited_steps(value, valid, lag_w, key, max_events: int, rows_per_even
     n_events = jnp.sum(valid)
     t_idx, b_idx = jnp.nonzero(valid, size=E, fill_value=0)
     present = jnp.arange(E) < n_events
-    logw = jnp.log(jnp.maximum(lag_w, 0.0) + 1e-30) + jnp.where(lag_w > 0, 0.0, -1e30)
-    lags = jax.random.categorical(key, logw, shape=(E, K))
+    lags = jax.random.choice(key, lag_w.shape[0], (E, K), p=jnp.maximum(lag_w, 0.0))
     ok = present[:, None] & (jnp.sum(lag_w) > 0)
     target = jnp.broadcast_to(value[t_idx, b_idx][:, None], (E, K))
     return t_idx[:, None] - lags, b_idx, ok, target, n_events
@@ -72,7 +76,7 @@ def draw_silent_steps(arrived, active, lag_w, key, history_len: int, n_rows: int
         lo = jnp.clip(p + first - last, 0, HT)
         hi = jnp.clip(p + last - first + 1, 0, HT)
         silent = silent & (away[hi] - away[lo] == 0)
-    idx = jax.random.categorical(key, jnp.where(silent.reshape(-1), 0.0, -1e30), shape=(n_rows,))
+    idx = jax.random.choice(key, silent.size, (n_rows,), p=silent.reshape(-1).astype(jnp.float32))
     ok = jnp.broadcast_to(jnp.any(silent), (n_rows,))
     return p[idx // B] - history_len, idx % B, ok, jnp.sum(silent)
 
@@ -92,13 +96,12 @@ def reward_model_updates(apply, optimizer, params, opt_state, ring: "FeedbackRin
     factors = (1.0, 1.0) if balance_max is None else sign_factors(jnp, ring.weight, ring.target, balance_max)
 
     def step(fresh: bool, carry, xs):
-        # Fresh and replay steps are separate scans: a fresh step's draw among the new rows (a categorical
-        # over every row) is most of a step's cost, and a replay step never needs it.
+        # Fresh and replay steps are separate scans: a replay step never needs the fresh rows' draw.
         p, o = carry
         k, on = xs
         kf, kr = jax.random.split(k)
         if fresh:
-            fi = jax.random.categorical(kf, jnp.where(weight > 0, 0.0, -1e30), shape=(batch_size,))
+            fi = jax.random.choice(kf, weight.shape[0], (batch_size,), p=(weight > 0).astype(jnp.float32))
             bo, ba, bw, bh = obs[fi], action[fi], weight[fi], target[fi]
         else:
             ri = jax.random.randint(kr, (batch_size,), 0, jnp.maximum(ring.size, 1))
