@@ -29,8 +29,8 @@
 With a silent teacher (`teach` 0: DDPG alone), steps 3 and 4 are skipped (`lax.cond` on a value every seed
 shares, so vmapped seeds skip it too): no row would have weight and no update would be live, so every output
 is the same (the trace's credited rows are zeros instead of weight-0 draws; a silent condition starts from
-`init`, whose ring is empty, so no replay update is lost), and DDPG's condition of Table II costs about what plain DDPG costs (measured in
-docs/environment.md, "Table II's wall time").
+`init`, whose ring is empty, so no replay update is lost), and DDPG's condition of Table II costs about what
+plain DDPG costs (measured in docs/environment.md, "Table II's wall time").
 
 `collect_chunk` is the same chunk with a `ChunkTrace` beside its outputs: the steps the teacher judged, the
 rule's signals, the teacher's output per step and the rows written to the feedback ring (the DDPG chunk's
