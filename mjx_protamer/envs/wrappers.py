@@ -5,6 +5,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from mjx_protamer.batch_cond import batch_any
 from mjx_protamer.envs.base import State
 
 
@@ -92,7 +93,9 @@ class AutoResetWrapper(Wrapper):
         def keep(_):
             return nstate.data, nstate.obs, dict(nstate.info)
 
-        data, obs, info = jax.lax.cond(jnp.any(done), reset_finished, keep, None)
+        # `batch_any`: with seeds vmapped, one reset pass serves every seed where any env finished (a seed with
+        # none keeps its states under `_where_batch`), instead of a select that pays the reset at every step
+        data, obs, info = jax.lax.cond(batch_any(jnp.any(done)), reset_finished, keep, None)
         info.update(reset_rng=keys[:, 0], final_obs=nstate.obs,
                     episodes=state.info["episodes"] + done.astype(jnp.int32))
         return nstate.replace(data=data, obs=obs, info=info)

@@ -156,8 +156,9 @@ def test_quiet_envs_act_with_the_deterministic_actor():
 def test_chunk_emits_the_transitions_it_stores_and_train_chunk_does_not_pay_for_them():
     """`collect_chunk`'s scan emits every iteration's transitions, (T, B, ...): exactly the rows the replay
     received (iteration i, env b at row ptr + i B + b), and the same state and metrics as `train_chunk`.
-    `train_chunk` drops them: its compiled program is no larger than a chunk that never stacked them."""
-    config = tiny_config(num_envs=8, chunk_steps=100, total_env_steps=1600)
+    `train_chunk` drops them: its compiled program is no larger than a chunk that never stacked them. One update
+    a step: two are unrolled (`_updates`), and their temporaries alone outgrow this toy trajectory."""
+    config = tiny_config(num_envs=8, chunk_steps=100, total_env_steps=1600, updates_per_step=1)
     trainer = make_train(config, PointReachEnv())
     tc = config.train
     a = trainer.init(jax.random.PRNGKey(0))
