@@ -84,8 +84,8 @@ def register(subparsers) -> None:
     )
     src = v.add_mutually_exclusive_group(required=True)
     src.add_argument("--checkpoints", type=Path, nargs="+", help="pretrain runs, one per seed")
-    src.add_argument("--pretrain-seeds", help="pretrain the main job for seeds 0..N-1 into OUT/checkpoints "
-                     "first (kept when finished)")
+    src.add_argument("--pretrain-seeds", help="pretrain the main job for seeds 0..N-1 first, as `protamer pretrain "
+                     "--seeds N --out OUT/checkpoints` does (finished seeds are kept)")
     v.add_argument("--channels", default="keyboard", help="comma-separated: keyboard, prosody, whisper "
                    "(default keyboard)")
     v.add_argument("--minutes", default=2.0, help="shown time per session (default 2)")
@@ -243,7 +243,7 @@ def _live(args: argparse.Namespace) -> int:
     # A directory this command wrote before is continued (its finished sessions are kept); anything else must be
     # new or empty. `own`: what a live-effect directory written before claims existed holds.
     out = args.out
-    own = ("live_effect.json", "none_0", "checkpoints/seed0")
+    own = ("live_effect.json", "none_0", "checkpoints/seed_0", "checkpoints/seed0")  # seed0: the layout of older runs
     ours = out.is_dir() and (kind_of(out) == LIVE or (kind_of(out) is None and any((out / f).exists() for f in own)))
     with claimed(out, LIVE, resume=ours, own=own):
         try:

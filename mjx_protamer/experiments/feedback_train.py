@@ -79,10 +79,13 @@ KINDS = ("keyboard", "prosody", "speech")
 
 
 def human_reward(apply):
-    """r_hat gated by a gain: `human_params = {"params": ..., "gain": scalar}`."""
+    """r_hat gated by a gain: `human_params = {"params": ..., "gain": scalar}`. Gain 0 (DDPG alone) skips the
+    model: a branch, where the gain is one value for every vmapped seed (Table II's conditions), so DDPG's
+    condition does not run the reward model on every minibatch to multiply it by 0 (5% of its chunk)."""
 
     def fn(hp, obs, action):
-        return hp["gain"] * apply(hp["params"], obs, action)
+        return jax.lax.cond(hp["gain"] != 0, lambda: hp["gain"] * apply(hp["params"], obs, action),
+                            lambda: jnp.zeros(obs.shape[:-1]))
 
     return fn
 

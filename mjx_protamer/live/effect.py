@@ -295,19 +295,18 @@ def figure(summary: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def pretrain_checkpoints(out: Path, seeds: int, log=print) -> list[Path]:
-    """The main job (configs/pretrain.yaml) for seeds 0..N-1 into OUT/checkpoints/seedK, kept when finished."""
-    paths = []
-    for k in range(seeds):
-        d = out / "checkpoints" / f"seed{k}"
-        if not (d / "eval.json").is_file():
-            if d.exists():
-                import shutil
+def pretrain_checkpoints(out: Path, seeds: int, config=None, progress: bool = False) -> list[Path]:
+    """The main job (the built-in pretrain config, or `config`) for seeds 0..N-1 into OUT/checkpoints/seed_<k>: what
+    `protamer pretrain --seeds N --out OUT/checkpoints` trains (experiments/pretrain_seeds.py), each seed bit for bit
+    the plain `protamer pretrain --set train.seed=k` run, with seeds.json beside them. Run again, it keeps the
+    finished seeds and continues an unfinished one from its last checkpoint."""
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.compile_cache import enable as enable_compile_cache
+    from mjx_protamer.experiments.pretrain_seeds import SEEDS_KIND, run_pretrain_seeds, seed_dir
+    from mjx_protamer.outdir import kind_of
 
-                shutil.rmtree(d)
-            d.parent.mkdir(parents=True, exist_ok=True)
-            log(f"[live] pretraining the main job, seed {k} -> {d}")
-            subprocess.run([sys.executable, "-m", "mjx_protamer.cli", "pretrain", "--no-progress", "--set",
-                            f"train.seed={k}", "--out", str(d)], check=True, stdout=subprocess.DEVNULL)
-        paths.append(d)
-    return paths
+    where = out / "checkpoints"
+    enable_compile_cache()
+    run_pretrain_seeds(config or PretrainConfig(), where, seeds, resume=kind_of(where) == SEEDS_KIND,
+                       progress=progress)
+    return [seed_dir(where, k) for k in range(seeds)]

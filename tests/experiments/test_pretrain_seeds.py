@@ -107,6 +107,26 @@ def test_resume_keeps_a_finished_seed_and_finishes_the_others(one_process, tmp_p
         assert len(err) == 1 and err[0].startswith("protamer: configuration error: ") and says in err[0], err
 
 
+def test_reproduce_live_pretrains_its_checkpoints_as_pretrain_seeds_does(one_process, tmp_path, capsys):
+    """`reproduce live --pretrain-seeds N` trains through `run_pretrain_seeds`: OUT/checkpoints/seed_<k> are the runs
+    of `pretrain --seeds N`; run again, the finished seeds are kept, not retrained."""
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.config import apply_overrides, from_dict, to_dict
+    from mjx_protamer.live.effect import pretrain_checkpoints
+
+    config = from_dict(PretrainConfig, apply_overrides(to_dict(PretrainConfig()), SETS[1::2]))
+    paths = pretrain_checkpoints(tmp_path, 2, config=config)
+    assert paths == [tmp_path / "checkpoints" / "seed_0", tmp_path / "checkpoints" / "seed_1"]
+    for k, run in enumerate(paths):
+        _same_run(run, one_process / f"seed_{k}")
+    assert json.loads((tmp_path / "checkpoints" / "seeds.json").read_text())["seeds"] == [0, 1]
+    kept = {p: p.stat().st_mtime_ns for run in paths for p in run.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    assert pretrain_checkpoints(tmp_path, 2, config=config) == paths
+    assert "[seed 1] kept from" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in kept} == kept
+
+
 @pytest.mark.parametrize("argv, says", [
     (["pretrain", "--seeds", "0"], "--seeds must be a whole number within 1..100000, got '0'"),
     (["pretrain", "--seeds", "2", "--set", "train.seed=3"], "--seeds N trains seeds 0..N-1 (train.seed of each); "
