@@ -359,7 +359,7 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
     from mjx_protamer.experiments.env_factory import make_env, resolve_backend
     from mjx_protamer.experiments.machine import describe
 
-    roofline = None if getattr(args, "skip_roofline", False) else _roofline_run(args)  # bad input: before any work
+    trainer_run = None if getattr(args, "skip_roofline", False) else _roofline_run(args)  # bad input: before any work
     single = _config(args.env, 1, args.steps)
     env = make_env(single)
     jax_single = _time_jax(env, single, args.repeats)
@@ -415,8 +415,8 @@ def run_train_benchmark(args: argparse.Namespace) -> dict:
         rates = result["batched_steps_per_s"]
         result["ratio_batched_native_vs_mjx"] = (rates["native"] / rates["mjx"]
                                                  if {"native", "mjx"} <= rates.keys() else None)
-    if roofline is not None:
-        result["batched_trainer"] = batched_roofline(*roofline, args.roofline_chunks, args.repeats)
+    if trainer_run is not None:
+        result["batched_trainer"] = batched_roofline(*trainer_run, args.roofline_chunks, args.repeats)
     if not args.skip_sb3:
         sb3 = _time_sb3(single, args.sb3_steps, args.repeats)
         result.update(sb3_steps_per_s=sb3["median"], sb3_runs=sb3["runs"], sb3_torch_threads=sb3["torch_threads"],
