@@ -247,6 +247,10 @@ def _live(args: argparse.Namespace) -> int:
     ours = out.is_dir() and (kind_of(out) == LIVE or (kind_of(out) is None and any((out / f).exists() for f in own)))
     with claimed(out, LIVE, resume=ours, own=own):
         try:
+            if seeds is not None:
+                from mjx_protamer.compile_cache import enable as enable_compile_cache
+
+                enable_compile_cache()
             checkpoints = pretrain_checkpoints(out, seeds) if seeds is not None else args.checkpoints
             plan = Plan(tuple(Path(c) for c in checkpoints), out, channels, minutes, 250.0, args.rule_config,
                         tuple(args.overrides), episodes, parallel, args.learner)

@@ -301,12 +301,10 @@ def pretrain_checkpoints(out: Path, seeds: int, config=None, progress: bool = Fa
     the plain `protamer pretrain --set train.seed=k` run, with seeds.json beside them. Run again, it keeps the
     finished seeds and continues an unfinished one from its last checkpoint."""
     from mjx_protamer.agents.ddpg.config import PretrainConfig
-    from mjx_protamer.compile_cache import enable as enable_compile_cache
     from mjx_protamer.experiments.pretrain_seeds import SEEDS_KIND, run_pretrain_seeds, seed_dir
     from mjx_protamer.outdir import kind_of
 
     where = out / "checkpoints"
-    enable_compile_cache()
     run_pretrain_seeds(config or PretrainConfig(), where, seeds, resume=kind_of(where) == SEEDS_KIND,
                        progress=progress)
     return [seed_dir(where, k) for k in range(seeds)]
