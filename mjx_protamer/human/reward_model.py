@@ -55,7 +55,7 @@ class RewardModelConfig:
     # 1 until `lr_decay_from` of the run, then linear to `lr_final_fraction`. Screened to shrink r_hat's spread
     # within one score on a compliant learner's states; it did not, that spread is not the optimiser's noise
     # (docs/experiments.md, "a step-size decay for it"), so no config sets it. A live session is open-ended and
-    # runs at the full rate (commands/feedback.py).
+    # runs at a constant rate (live/reward_model.py).
     lr_final_fraction: float = 1.0
     lr_decay_from: float = 0.5  # the share of the run before the decay starts (see lr_final_fraction)
     # The observation enters as asinh(obs): about obs near 0, about log(2 |obs|) far out. The touch features are

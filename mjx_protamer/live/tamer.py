@@ -213,7 +213,7 @@ def _credit_text(credit) -> str:
 
 def session_pretrain(pre, chunk_steps: int, session: SessionConfig, ddpg_overrides: dict, replay_size: int):
     """The checkpoint's PretrainConfig as a session runs it: one env, the session's chunk and updates per step,
-    no warm-up, the full step size (a session is open-ended), and the session's DDPG keys
+    no warm-up, a constant step size (a session is open-ended), and the session's DDPG keys
     (feedback_config.SESSION_DDPG_KEYS)."""
     train = dataclasses.replace(pre.train, num_envs=1, chunk_steps=chunk_steps, warmup_env_steps=0,
                                 total_env_steps=max(pre.train.total_env_steps, chunk_steps), num_devices=1,

@@ -65,7 +65,7 @@ class DDPGConfig:
     actor_preact_free: float = 0.0  # pre-tanh magnitude the penalty leaves free (0: a pull toward 0 everywhere)
     # Step-size decay over a run (actor and critic): 1 until `lr_decay_from` of the run's iterations, then
     # linear to `lr_final_fraction` of the rate at the last one. 1.0 = constant (the paper). A fine-tuning
-    # session is open-ended and always runs at the full rate (commands/feedback.py).
+    # session is open-ended: a constant rate, its feedback config's actor_lr / critic_lr (live/tamer.py).
     lr_final_fraction: float = 1.0
     lr_decay_from: float = 0.5  # the share of the run before the step-size decay starts (see lr_final_fraction)
     # Action biasing (losses.actor_loss): the actor also climbs `human_actor_coef * r_hat(s, mu(s))` of the human
