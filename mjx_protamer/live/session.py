@@ -135,6 +135,7 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         d = learner.config.ddpg
         print(f"[finetune] DDPG trains on {d.reward_alpha:g} r_env + {d.reward_beta:g} r_hat"
               + (f", the actor biased by {d.human_actor_coef:g} r_hat" if d.human_actor_coef else "")
+              + (f" at its own step size {d.human_actor_lr:g}" if d.human_actor_coef and d.human_actor_lr else "")
               + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
               + f"; feedback config {spec.config_path or 'the built-in defaults'}", flush=True)
 

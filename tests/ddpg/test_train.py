@@ -108,6 +108,35 @@ def test_human_params_relabel_without_recompiling():
     assert trainer.train_chunk._cache_size() == 1
 
 
+def test_action_biasing_on_its_own_step_size_moves_the_actor_when_actor_lr_is_tiny():
+    """`ddpg.human_actor_lr`: the person's term has its own Adam. With actor_lr ~0 the actor still climbs r_hat
+    at human_actor_lr; with one shared Adam (human_actor_lr 0) the same tiny actor_lr holds it still."""
+    base = tiny_config(total_env_steps=200, warmup_env_steps=40)  # 50 iterations x 4 envs: 40 update steps
+    w = jnp.array([1.0, -1.0], jnp.float32)
+    human = lambda params, obs, action: action @ params["w"]  # r_hat: the first action up, the second down
+    obs = jax.random.normal(jax.random.PRNGKey(5), (64, PointReachEnv().observation_size))
+
+    def moved(**ddpg):
+        config = dataclasses.replace(base, ddpg=dataclasses.replace(base.ddpg, actor_lr=1e-9, human_actor_coef=1.0,
+                                                                    **ddpg))
+        trainer = make_train(config, PointReachEnv(), human_reward_fn=human)
+        state = trainer.init(jax.random.PRNGKey(0))
+        before = trainer.act(state.actor_params, obs)
+        state, _ = trainer.train_chunk(state, {"w": w})
+        return float(jnp.mean((trainer.act(state.actor_params, obs) - before) @ w)), state
+
+    own, state = moved(human_actor_lr=1e-2)
+    shared, shared_state = moved(human_actor_lr=0.0)
+    assert own > 0.2, own
+    assert abs(shared) < 1e-3, shared
+    assert state.human_opt_state is not None and shared_state.human_opt_state is None
+    # the state follows from the config alone (a saved run restores from its config.yaml); without a model unused
+    own_config = dataclasses.replace(base, ddpg=dataclasses.replace(base.ddpg, human_actor_coef=1.0,
+                                                                    human_actor_lr=1e-2))
+    no_model = make_train(own_config, PointReachEnv()).init(jax.random.PRNGKey(0))
+    assert no_model.human_opt_state is not None
+
+
 def test_train_vmaps_over_seeds():
     config = tiny_config(total_env_steps=400)
     trainer = make_train(config, PointReachEnv())

@@ -72,6 +72,11 @@ class DDPGConfig:
     # reward model, beside the critic's Q (whose scale is a return: tens per unit of step reward). 0: the paper's
     # DDPG, where r_hat reaches the policy only through `reward_beta` and the critic.
     human_actor_coef: float = 0.0
+    # The step size of action biasing's own Adam (0: one Adam over the actor's whole loss, at actor_lr). Adam
+    # normalises a gradient's scale away, so a smaller actor_lr is the only way to slow what the intrinsic
+    # reward alone changes in a session (a session without feedback has no other term); with its own optimiser
+    # the person's term keeps this step size while actor_lr slows the rest (docs/human_feedback.md).
+    human_actor_lr: float = 0.0
     # A pull of the actor toward the actor the run started from (a session: its checkpoint's), weighing
     # `anchor_coef * |mu(s) - mu_0(s)|^2`: bounds what the intrinsic reward alone changes in a session.
     anchor_coef: float = 0.0
@@ -96,6 +101,8 @@ class DDPGConfig:
         check(self.reward_alpha >= 0.0, "reward_alpha", f"must be >= 0, got {self.reward_alpha}")
         check(self.reward_beta >= 0.0, "reward_beta", f"must be >= 0, got {self.reward_beta}")
         check(self.human_actor_coef >= 0.0, "human_actor_coef", f"must be >= 0, got {self.human_actor_coef}")
+        check(self.human_actor_lr >= 0.0, "human_actor_lr",
+              f"must be >= 0 (0: action biasing shares the actor's optimiser), got {self.human_actor_lr}")
         check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
         check(self.replay_size >= self.batch_size, "replay_size",
               f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")

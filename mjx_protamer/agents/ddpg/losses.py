@@ -63,13 +63,23 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
     loss = -jnp.mean(critic_apply(critic_params, obs, action))
     loss = loss + preact_coef * jnp.mean(jnp.maximum(jnp.abs(pre) - preact_free, 0.0) ** 2)
     if human is not None:
-        fn, params, coef = human
-        loss = loss - coef * jnp.mean(fn(params, obs, action))
+        loss = loss + human_bias_loss(action, obs, human)
     if anchor is not None:
         params, coef = anchor
         ref = jax.lax.stop_gradient(actor_apply(params, obs))
         loss = loss + coef * jnp.mean(jnp.sum((action - ref) ** 2, axis=-1))
     return loss
+
+
+def human_bias_loss(action, obs, human) -> jax.Array:
+    """Action biasing's term of the actor loss: `-coef * mean r_hat(s, a)`, `human` = (fn, params, coef)."""
+    fn, params, coef = human
+    return -coef * jnp.mean(fn(params, obs, action))
+
+
+def human_actor_loss(actor_params, actor_apply, obs: jax.Array, human: tuple) -> jax.Array:
+    """Action biasing's term alone, as a function of the actor (for its own optimiser: `ddpg.human_actor_lr`)."""
+    return human_bias_loss(jnp.tanh(actor_apply(actor_params, obs, True)), obs, human)
 
 
 def soft_update(target, online, tau: float):

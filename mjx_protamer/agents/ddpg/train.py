@@ -63,6 +63,8 @@ class TrainState:
     episode_return: jax.Array  # (num_envs,) return of each env's running episode
     # the actor `ddpg.anchor_coef` pulls toward (None without an anchor: checkpoints of such runs hold no copy)
     anchor_params: Any = None
+    # action biasing's own Adam (`ddpg.human_actor_lr` > 0 with a human reward model; None otherwise)
+    human_opt_state: Any = None
 
 
 class Learner(NamedTuple):
@@ -73,6 +75,7 @@ class Learner(NamedTuple):
     target_critic_params: Any
     actor_opt_state: Any
     critic_opt_state: Any
+    human_opt_state: Any = None
 
 
 class Trainer(NamedTuple):
@@ -94,7 +97,7 @@ class Trainer(NamedTuple):
 
 def _learner(ts: TrainState) -> Learner:
     return Learner(ts.actor_params, ts.critic_params, ts.target_actor_params, ts.target_critic_params,
-                   ts.actor_opt_state, ts.critic_opt_state)
+                   ts.actor_opt_state, ts.critic_opt_state, ts.human_opt_state)
 
 
 def _with_learner(ts: TrainState, lr: Learner) -> TrainState:
@@ -162,6 +165,11 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
     critic = Critic(hidden=tuple(dc.critic_hidden))
     actor_opt = optax.adam(dc.actor_lr)
     critic_opt = optax.adam(dc.critic_lr)
+    bias_coef = dc.human_actor_coef if human_reward_fn is not None else 0.0
+    # action biasing on its own Adam: the person's term keeps its step size while actor_lr slows the intrinsic
+    # reward's (DDPGConfig.human_actor_lr). Its state follows from the config alone, so that a saved run restores
+    # from its config.yaml (a session without feedback carries it unused)
+    human_opt = optax.adam(dc.human_actor_lr) if dc.human_actor_coef > 0 and dc.human_actor_lr > 0 else None
     warmup_iterations = tc.warmup_iterations
     # The region mask rides beside the transitions for teacher rules, never into the replay (it would grow
     # every row for a signal the learner never reads).
@@ -203,6 +211,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             iteration=jnp.zeros((), jnp.int32),
             episode_return=jnp.zeros((local_envs,)),
             anchor_params=actor_params if dc.anchor_coef > 0 else None,
+            human_opt_state=human_opt.init(actor_params) if human_opt is not None else None,
         ))
 
     def _step_scale(iteration):
@@ -221,13 +230,20 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         c_updates, critic_opt_state = critic_opt.update(pmean(c_grads), lr.critic_opt_state, lr.critic_params)
         critic_params = optax.apply_updates(lr.critic_params, jax.tree.map(lambda u: u * scale, c_updates))
 
-        bias = (human_reward_fn, human_params, dc.human_actor_coef) \
-            if human_reward_fn is not None and dc.human_actor_coef > 0 else None
+        bias = (human_reward_fn, human_params, bias_coef) if bias_coef > 0 else None
         anchor = (anchor_params, dc.anchor_coef) if anchor_params is not None and dc.anchor_coef > 0 else None
+        own = human_opt is not None and bias is not None
         a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(
             lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs, dc.actor_preact_coef,
-            dc.actor_preact_free, bias, anchor)
+            dc.actor_preact_free, None if own else bias, anchor)
         a_updates, actor_opt_state = actor_opt.update(pmean(a_grads), lr.actor_opt_state, lr.actor_params)
+        human_opt_state = lr.human_opt_state
+        if own:
+            h_loss, h_grads = jax.value_and_grad(losses.human_actor_loss)(lr.actor_params, actor.apply, batch.obs,
+                                                                          bias)
+            h_updates, human_opt_state = human_opt.update(pmean(h_grads), lr.human_opt_state, lr.actor_params)
+            a_updates = jax.tree.map(jnp.add, a_updates, h_updates)
+            a_loss = a_loss + h_loss
         actor_params = optax.apply_updates(lr.actor_params, jax.tree.map(lambda u: u * scale, a_updates))
 
         new = Learner(
@@ -237,6 +253,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             target_critic_params=losses.soft_update(lr.target_critic_params, critic_params, dc.tau),
             actor_opt_state=actor_opt_state,
             critic_opt_state=critic_opt_state,
+            human_opt_state=human_opt_state,
         )
         return new, jnp.stack([c_loss, a_loss, q_mean, jnp.mean(reward)])
 
@@ -381,5 +398,5 @@ def _state_specs() -> TrainState:
         actor_opt_state=P(), critic_opt_state=P(),
         env_state=split, noise_state=split,
         replay=replay.ReplayBuffer(data=split, ptr=P(), size=P()),
-        rng=P(), iteration=P(), episode_return=split, anchor_params=P(),
+        rng=P(), iteration=P(), episode_return=split, anchor_params=P(), human_opt_state=P(),
     )
