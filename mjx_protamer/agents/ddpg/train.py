@@ -63,7 +63,8 @@ class TrainState:
     episode_return: jax.Array  # (num_envs,) return of each env's running episode
     # the actor `ddpg.anchor_coef` pulls toward (None without an anchor: checkpoints of such runs hold no copy)
     anchor_params: Any = None
-    # action biasing's own Adam (`ddpg.human_actor_lr` > 0 with a human reward model; None otherwise)
+    # action biasing's own Adam (`ddpg.human_actor_coef` and `ddpg.human_actor_lr` > 0: from the config alone, so a
+    # saved run restores from its config.yaml; unused without a human reward model; None otherwise)
     human_opt_state: Any = None
 
 
