@@ -264,8 +264,40 @@ def time_batched_trainer(config, env, seeds: int, chunks: int, repeats: int) -> 
     state, _ = step0(state)  # compile
     jax.block_until_ready(state)
     state, times0 = _time_chunks(step0, state, chunks, repeats)
-    return {"chunk_s": statistics.median(times), "chunk_s_runs": times, "warm_up_and_compile_s": warm_s,
-            "no_update_chunk_s": statistics.median(times0), "no_update_chunk_s_runs": times0}
+    out = {"chunk_s": statistics.median(times), "chunk_s_runs": times, "warm_up_and_compile_s": warm_s,
+           "no_update_chunk_s": statistics.median(times0), "no_update_chunk_s_runs": times0}
+    if seeds > 1:  # vmapped seeds are what `reproduce table2` trains, two conditions at a time
+        pair = _time_two_at_once(step, state, chunks, repeats)
+        out.update(two_at_once_chunk_s=statistics.median(pair), two_at_once_chunk_s_runs=pair)
+    return out
+
+
+def _time_two_at_once(step, state, chunks: int, repeats: int) -> list[float]:
+    """Seconds per chunk when two copies of the trainer's program run at once on host threads
+    (`side_by_side`, as `reproduce table2` trains two conditions): the pair's wall time over both its chunks."""
+    import jax
+    import jax.numpy as jnp
+
+    from mjx_protamer.experiments.side_by_side import run_side_by_side
+
+    states = [state, jax.tree.map(jnp.copy, state)]
+    times = []
+
+    def job(k):
+        def run(between_chunks):
+            between_chunks()  # compiled already: the second program need not wait for a first chunk
+            s, metrics = states[k], None
+            for _ in range(chunks):
+                s, metrics = step(s)
+            jax.block_until_ready(metrics)
+            states[k] = s
+        return run
+
+    for _ in range(repeats):
+        t = time.perf_counter()
+        run_side_by_side([job(0), job(1)], at_once=2)
+        times.append((time.perf_counter() - t) / (2 * chunks))
+    return times
 
 
 def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
@@ -276,6 +308,8 @@ def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
     trainer's chunk without updates from the trained state (the worlds the policy visits, with acting and replay
     writes: `roofline_trained_worlds_chunk_s`, `fraction_of_roofline_trained_worlds`). The fraction is roofline
     time over measured time: 1.0 would mean nothing but the update's arithmetic and the env costs anything.
+    With vmapped seeds also per chunk of two copies of the program at once (`..._two_at_once`): how `reproduce
+    table2` trains, two conditions at a time, since one program leaves part of the cores idle.
     Keyed by the number of vmapped seeds."""
     from mjx_protamer.experiments.bench_env import _bench_env
     from mjx_protamer.experiments.env_factory import make_env
@@ -304,6 +338,10 @@ def batched_roofline(config, seed_counts, chunks: int, repeats: int) -> dict:
             update_share_beyond_matmuls_s=timed["chunk_s"] - trained_s,
             updates_per_s=updates / timed["chunk_s"], env_steps_per_s=tc.chunk_steps * worlds / timed["chunk_s"],
             run_train_s_projected=tc.num_chunks * timed["chunk_s"], run_train_s_at_roofline=tc.num_chunks * roofline_s)
+        if "two_at_once_chunk_s" in timed:
+            out["seeds"][str(seeds)].update(
+                fraction_of_roofline_two_at_once=roofline_s / timed["two_at_once_chunk_s"],
+                fraction_of_roofline_trained_worlds_two_at_once=trained_s / timed["two_at_once_chunk_s"])
     return out
 
 

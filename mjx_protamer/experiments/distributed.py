@@ -237,7 +237,8 @@ def hand_to_process_0(work: str, share) -> list:
 
 
 def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resume: bool = False,
-                         claim_kind: str = "table2", own: tuple[str, ...] = (), split: str = "both") -> dict | None:
+                         claim_kind: str = "table2", own: tuple[str, ...] = (), split: str = "both",
+                         at_once: int = 2) -> dict | None:
     """This process's part of a table2 run on `spec`'s job: join, claim `out` (process 0) and `out/process_<k>`,
     train its share of the conditions and seeds (`work_split.split_work`), hand the results to process 0.
     Process 0 returns `write_table2`'s result for the whole run (written into `out`), the others None. Raises
@@ -274,7 +275,7 @@ def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resum
         with claimed(mine, claim_kind, resume=resume, own=own), alone():
             # a process whose directory holds no run yet (it had not started) starts its share now
             trained = T2.train_table2(mine_cfg, mine, progress, resume and (mine / "config.yaml").is_file(),
-                                      pooled=keep_for_process_0 if pool_at_0 else None)
+                                      pooled=keep_for_process_0 if pool_at_0 else None, at_once=at_once)
         parts = [T2.Trained(**p) for p in hand_to_process_0("table2", dataclasses.asdict(trained))]
         blobs = gather_bytes(kept["blob"]) if pool_at_0 else None
         if index != 0:
@@ -285,10 +286,10 @@ def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resum
         if pool_at_0:
             with alone():
                 pool_shares.pool_shares(cfg, kept["ft"], shares, blobs, merged.evals)
-        return _write_merged(cfg, out, merged, parts, layout, time.perf_counter() - t_all)
+        return _write_merged(cfg, out, merged, parts, layout, time.perf_counter() - t_all, at_once)
 
 
-def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: float) -> dict:
+def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: float, at_once: int) -> dict:
     """Process 0: what one process writes for the whole run, from every process's part; processes.json and
     table2.json's `processes` say which process trained which conditions and seeds, and for how long."""
     import yaml
@@ -303,7 +304,8 @@ def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: fl
             write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(ev, indent=2))
     extra = {"processes": {**layout, "dirs": [process_dir(out, k).name for k in range(layout["count"])],
                            "train_wall_s": {c.name: [sum(p.wall[c.name]) if c.name in p.wall else None
-                                                     for p in parts] for c in cfg.conditions}}}
+                                                     for p in parts] for c in cfg.conditions}},
+             "conditions_at_once": at_once}
     return write_table2(cfg, out, merged, total_s, extra)
 
 

@@ -20,7 +20,21 @@ def describe() -> dict:
         "device_kind": devices[0].device_kind if devices else None,
         "cpu_count": os.cpu_count(),
         "processor": platform.processor() or platform.machine(),
+        "cpu_model": cpu_model(),
         "loadavg": list(os.getloadavg()),
         "jax_version": jax.__version__,
         "python": platform.python_version(),
     }
+
+
+def cpu_model() -> str | None:
+    """The CPU's model name (Linux: /proc/cpuinfo), or None. XLA compiles for the host's instruction set, so a
+    run's rounding, and with it every seed's trajectory, can differ from one CPU model to another."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return None

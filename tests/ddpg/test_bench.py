@@ -101,6 +101,10 @@ def test_batched_roofline_reports_one_and_vmapped_seeds(tmp_path):
         assert s["roofline_trained_worlds_chunk_s"] == pytest.approx(s["roofline_update_s"] + s["no_update_chunk_s"])
         assert s["updates_per_s"] * s["chunk_s"] == pytest.approx(10 * 2 * n)
         assert s["run_train_s_projected"] == pytest.approx(config.train.num_chunks * s["chunk_s"])
+    # vmapped seeds are also timed as `reproduce table2` runs them, two programs at once
+    two = r["seeds"]["2"]
+    assert "two_at_once_chunk_s" not in r["seeds"]["1"] and two["two_at_once_chunk_s"] > 0
+    assert two["fraction_of_roofline_two_at_once"] == pytest.approx(two["roofline_chunk_s"] / two["two_at_once_chunk_s"])
 
 
 @pytest.mark.parametrize("argv, says", [

@@ -80,8 +80,9 @@ def test_reproduce_table2_without_config_runs_the_yaml_shipped_in_the_package(tm
     assert "configs/*.yaml" in package_data["mjx_protamer"]
     ran = []
 
-    def run_table2(cfg, out, progress=True, resume=False):
+    def run_table2(cfg, out, progress=True, resume=False, at_once=1):
         ran.append(cfg)
+        assert at_once == 2  # the default: two conditions at a time
         (out / "table2.md").write_text("table\n")
         return {"table_md": str(out / "table2.md"), "wall_s": 0.0, "out_dir": str(out), "region_frequencies": {},
                 **{k: "" for k in ("table_json", "figure1", "figure2", "training_csv")}}

@@ -33,11 +33,12 @@ def test_seeds_that_cannot_fit_are_refused_before_allocating(tmp_path, capsys, m
                         "--out", tmp_path / "out", "--quiet")
     assert code == 2 and len(err) == 1, err
     line = err[0]
-    assert line.startswith("protamer: not enough memory: reproduce table2 (2 conditions, one at a time) for 1,000 "
+    assert line.startswith("protamer: not enough memory: reproduce table2 (2 conditions, 2 at a time) for 1,000 "
                            "seeds needs about "), line
     assert "learner state and replay" in line and "feedback state" in line and "but 1.00 GiB is available" in line
     assert "lower --seeds (about " in line
-    assert "or lower ddpg.replay_size, train.num_envs or train.eval_episodes" in line
+    assert "or lower ddpg.replay_size, train.num_envs or train.eval_episodes, or train fewer conditions at once " \
+           "(--conditions-at-once 1)" in line
     # the seeds said to fit do fit with the headroom, one more does not
     fit = int(re.search(r"about ([\d,]+) would fit", line).group(1).replace(",", ""))
     assert time.perf_counter() - t0 < 30  # no compile, nothing allocated
@@ -51,7 +52,7 @@ def test_seeds_that_cannot_fit_are_refused_before_allocating(tmp_path, capsys, m
 
     cfg = load_table2_config(_toy(tmp_path))
     env = make_env(cfg.pretrain)
-    parts = memory_per_seed(cfg, env, make_feedback_train(cfg.pretrain, env, cfg.feedback, cfg.batched))
+    parts = memory_per_seed(cfg, env, make_feedback_train(cfg.pretrain, env, cfg.feedback, cfg.batched), at_once=2)
     assert memory.check_seeds_fit(parts, fit, [], "t", "h") == fit * sum(parts.values())
 
 
@@ -64,7 +65,13 @@ def test_the_estimate_counts_every_seed_and_the_replay(tmp_path):
     parts = {}
     for name, cfg in (("small", small), ("big", big)):
         env = make_env(cfg.pretrain)
-        parts[name] = memory_per_seed(cfg, env, make_feedback_train(cfg.pretrain, env, cfg.feedback, cfg.batched))
+        ft = make_feedback_train(cfg.pretrain, env, cfg.feedback, cfg.batched)
+        parts[name] = memory_per_seed(cfg, env, ft)
+    # two conditions trained at once hold two learners, feedback states and test episodes; what is kept of every
+    # condition until the end does not grow
+    two = memory_per_seed(big, env, ft, at_once=2)
+    assert all(two[k] == 2 * parts["big"][k] for k in ("learner state and replay", "feedback state", "test episodes"))
+    assert two["kept per condition"] == parts["big"]["kept per condition"]
     row = (parts["big"]["learner state and replay"] - parts["small"]["learner state and replay"]) / 180_000
     assert row >= 4 * (2 * env.observation_size + env.action_size + 2)  # obs, next obs, action, reward, done
     assert parts["big"]["feedback state"] == parts["small"]["feedback state"]

@@ -108,8 +108,9 @@ def test_table2_stopped_by_a_full_disk_keeps_its_finished_conditions_and_resumes
     cfg = tmp_path / "t2.yaml"
     cfg.write_text(yaml.safe_dump(TABLE2))
     out = tmp_path / "t2"
-    argv = ["reproduce", "table2", "--config", cfg, "--seeds", "2", "--out", out, "--quiet"]
-    # saves per condition: its reward models, then its agents; the 4th is DTK's agents, after DTK's reward models
+    # one condition at a time, so that the saves come in a known order: per condition its reward models, then its
+    # agents; the 4th is DTK's agents, after DTK's reward models (two at a time interleave them)
+    argv = ["reproduce", "table2", "--config", cfg, "--seeds", "2", "--out", out, "--quiet", "--conditions-at-once", "1"]
     _full_disk_on(monkeypatch, 4)
     code, err = run_cli(capsys, *argv)
     assert code == 1 and len(err) == 1, err

@@ -26,10 +26,10 @@ from mjx_protamer.experiments.table2.models import (load_condition_agents,
                                                     load_finished_condition, save_condition_models)
 from mjx_protamer.experiments.table2.report import (LABELS, PAPER, SELECTION_METRICS, format_markdown,
                                                     reward_preset_name, summarize)
-from mjx_protamer.experiments.table2.run import (STATE_STRIDE, Trained, make_seed_evaluator, memory_per_seed,
+from mjx_protamer.experiments.table2.run import (AT_ONCE, STATE_STRIDE, Trained, make_seed_evaluator, memory_per_seed,
                                                  pooled_corr, run_table2, train_table2)
 
-__all__ = ["DEFAULT_CONDITIONS", "DEFAULT_CONFIG", "LABELS", "PAPER", "SELECTION_METRICS", "STATE_STRIDE",
+__all__ = ["AT_ONCE", "DEFAULT_CONDITIONS", "DEFAULT_CONFIG", "LABELS", "PAPER", "SELECTION_METRICS", "STATE_STRIDE",
            "Condition", "Table2Config", "Trained", "contrast", "format_markdown",
            "load_condition_agents", "load_condition_models", "load_condition_reward_models",
            "load_finished_condition", "load_table2_config", "make_seed_evaluator", "memory_per_seed",

@@ -10,6 +10,7 @@ import jax
 import numpy as np
 
 from mjx_protamer.experiments import metrics as M
+from mjx_protamer.experiments.machine import cpu_model
 from mjx_protamer.experiments.stats import contrast, seed_stats
 from mjx_protamer.experiments.table2.config import Table2Config
 
@@ -71,7 +72,7 @@ def summarize(cfg: Table2Config, evals: dict, wall: dict, total_s: float) -> dic
         "eval_episodes_per_seed": tc.eval_episodes,
         "wall_s": total_s,
         "machine": f"{platform.machine()}, {jax.local_device_count()} x {jax.local_devices()[0].platform}, "
-                   f"{__import__('os').cpu_count()} CPU cores visible",
+                   f"{__import__('os').cpu_count()} CPU cores visible" + (f" ({cpu})" if (cpu := cpu_model()) else ""),
     }
 
 
@@ -99,6 +100,11 @@ def reward_preset_name(pre) -> str:
     return f"{name} ({', '.join(diff)})" if diff else name
 
 
+def _at_once(summary: dict) -> str:
+    k = summary.get("conditions_at_once", 1)
+    return f" ({k} conditions trained at a time)" if k > 1 else ""
+
+
 def format_markdown(summary: dict) -> str:
     conds = summary["conditions"]
     names = list(conds)
@@ -109,7 +115,7 @@ def format_markdown(summary: dict) -> str:
              f"{summary['eval_episodes_per_seed']} test episodes (deterministic actor), ± the 95% confidence "
              f"half-width (Student t over seeds); {summary['env']} env, reward preset {summary.get('reward')}, "
              f"{summary['num_envs']} envs x {summary['env_steps_per_run']} env steps per run; wall time "
-             f"{summary['wall_s']:.0f} s.", "", head, sep]
+             f"{summary['wall_s']:.0f} s{_at_once(summary)}.", "", head, sep]
     for metric in M.METRIC_NAMES:
         cells = []
         for c in names:

@@ -27,6 +27,7 @@ from mjx_protamer.config import ConfigError, check_resume_config, to_dict
 from mjx_protamer.experiments.feedback_train import human_reward, make_feedback_train
 from mjx_protamer.experiments.run_log import flatten
 from mjx_protamer.experiments.runner import run_chunks
+from mjx_protamer.experiments.side_by_side import run_side_by_side
 from mjx_protamer.experiments.snapshot_selection import SnapshotSelection
 from mjx_protamer.experiments.stats import pearson
 from mjx_protamer.experiments.table2.artifacts import write_table2
@@ -35,14 +36,19 @@ from mjx_protamer.experiments.table2.models import load_condition_models, save_c
 from mjx_protamer.experiments.table2.report import SELECTION_METRICS
 
 STATE_STRIDE = 5  # every 5th test step (25 ms) is kept for the pooled score: neighbours are near copies
+# Conditions trained at the same time, each on a host thread (experiments/side_by_side.py: on the 2-core CPU a
+# second condition's chunks fill the cores the first leaves idle; the pair takes 0.78-0.83 of its sequential time)
+AT_ONCE = 2
 
 
-def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False) -> dict:
+def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False,
+               at_once: int = AT_ONCE) -> dict:
     """Every condition's results are written atomically as it finishes (`condition_<name>.json`): a run
-    killed at any moment loses at most the condition it was training, and `resume` continues it."""
+    killed at any moment loses at most the conditions it was training (`at_once` of them), and `resume`
+    continues it."""
     t_all = time.perf_counter()
-    trained = train_table2(cfg, out_dir, progress, resume)
-    return write_table2(cfg, out_dir, trained, time.perf_counter() - t_all)
+    trained = train_table2(cfg, out_dir, progress, resume, at_once=at_once)
+    return write_table2(cfg, out_dir, trained, time.perf_counter() - t_all, {"conditions_at_once": at_once})
 
 
 @dataclasses.dataclass
@@ -55,11 +61,14 @@ class Trained:
     wall: dict[str, list[float]]
 
 
-def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False, pooled=None) -> Trained:
-    """Train and test every condition on `cfg.seeds` (vmapped in one program), writing each condition's results
-    and agents into `out_dir` as it finishes; the pooled reward-model score at the end (`pooled`: what computes
-    it, `pooled_corr`'s signature; a run whose conditions are split across processes pools them elsewhere). No
-    table or figures: `write_table2` makes them."""
+def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False, pooled=None,
+                 at_once: int = AT_ONCE) -> Trained:
+    """Train and test every condition on `cfg.seeds` (vmapped in one program), `at_once` conditions at a time
+    (`side_by_side`: each computes what it would alone), writing each condition's results and agents into
+    `out_dir` as it finishes; the pooled reward-model score at the end (`pooled`: what computes it,
+    `pooled_corr`'s signature; a run whose conditions are split across processes pools them elsewhere). No table
+    or figures: `write_table2` makes them. A condition's `train_wall_s` is its own wall time, shared with the
+    conditions beside it."""
     from mjx_protamer.atomic import write_atomic
     from mjx_protamer.experiments.env_factory import make_env, with_resolved_backend
 
@@ -81,14 +90,16 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     from mjx_protamer.agents.ddpg.train import resolve_devices
     from mjx_protamer.experiments import memory
 
-    memory.check_seeds_fit(memory_per_seed(cfg, env, ft), len(cfg.seeds), resolve_devices(tc.num_devices),
-                           f"reproduce table2 ({len(cfg.conditions)} conditions, one at a time)",
-                           "lower ddpg.replay_size, train.num_envs or train.eval_episodes")
+    at_once = max(1, min(at_once, len(cfg.conditions)))
+    memory.check_seeds_fit(memory_per_seed(cfg, env, ft, at_once), len(cfg.seeds),
+                           resolve_devices(tc.num_devices),
+                           f"reproduce table2 ({len(cfg.conditions)} conditions, {at_once} at a time)",
+                           "lower ddpg.replay_size, train.num_envs or train.eval_episodes, or train fewer "
+                           "conditions at once (--conditions-at-once 1)")
     if resume:
         check_resume_config(out / "config.yaml", cfg)
     out.mkdir(parents=True, exist_ok=True)
     write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(cfg), sort_keys=False))
-    training: list[dict] = []
     evals: dict[str, dict[int, dict]] = {c.name: {} for c in cfg.conditions}
     wall: dict[str, list[float]] = {c.name: [] for c in cfg.conditions}
     # Seeds run side by side in one program: init, every chunk and the test episodes are vmapped over them.
@@ -104,23 +115,17 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     evaluate_seeds = make_seed_evaluator(cfg, env, ft)  # traced once for every condition and actor
     reward_models: dict[str, object] = {}
     test_states: dict[str, dict] = {}
-    for cond in cfg.conditions:
-        if done[cond.name].is_file():  # finished before an interruption (resume)
-            reward_models[cond.name], test_states[cond.name] = load_condition_models(out, cond.name, untrained)
-            kept = json.loads(done[cond.name].read_text())
-            training += kept["training"]
-            evals[cond.name] = {int(k): v for k, v in kept["evals"].items()}
-            wall[cond.name].append(kept["train_wall_s"])
-            if progress:
-                print(f"[{cond.name}] kept from {done[cond.name]}", flush=True)
-            continue
+    rows: dict[str, list[dict]] = {c.name: [] for c in cfg.conditions}  # training rows, joined in order at the end
+
+    def train_condition(cond, between_chunks) -> None:
+        """Train, test and save one condition on every seed; `between_chunks` (side_by_side) may stop it."""
         kind = None if cond.channel == "none" else cond.channel
         credit = dataclasses.replace(cfg.feedback.credit, scheme=cond.credit)
         t0 = time.perf_counter()
         fp = ft.params(kind, credit)
         fp = fp._replace(gain=fp.gain * cond.beta_scale)
 
-        def train_step(state):  # called within this iteration: fp is this condition's
+        def train_step(state):
             ts, fs, m, _ = chunk_fn(*state, fp)
             return (ts, fs), m, None
 
@@ -128,17 +133,18 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
                                            lambda new, fp=fp: {"params": new[1].rm_params, "gain": fp.gain})
 
         def progress_fn(info):
-            rows = [{"condition": cond.name, "seed": int(seed), "chunk": info.chunk,
-                     **flatten(jax.tree.map(lambda x, i=i: x[i], info.metrics), env.reward_term_names)}
-                    for i, seed in enumerate(cfg.seeds)]
-            training.extend(rows)
+            new_rows = [{"condition": cond.name, "seed": int(seed), "chunk": info.chunk,
+                         **flatten(jax.tree.map(lambda x, i=i: x[i], info.metrics), env.reward_term_names)}
+                        for i, seed in enumerate(cfg.seeds)]
+            rows[cond.name].extend(new_rows)
             if progress and (info.chunk % max(1, tc.num_chunks // 5) == 0 or info.chunk == tc.num_chunks):
                 print(f"[{cond.name}, {len(seeds)} seeds] chunk {info.chunk}/{tc.num_chunks} return "
-                      f"{np.nanmean([r['episode_return'] for r in rows]):.1f} contact "
-                      f"{np.mean([r['contact_rate'] for r in rows]):.2f} feedback "
-                      f"{np.mean([r['feedback_total'] for r in rows]):.0f} r_hat corr "
-                      f"{np.mean([r['r_hat_score_corr'] for r in rows]):+.2f} "
+                      f"{np.nanmean([r['episode_return'] for r in new_rows]):.1f} contact "
+                      f"{np.mean([r['contact_rate'] for r in new_rows]):.2f} feedback "
+                      f"{np.mean([r['feedback_total'] for r in new_rows]):.0f} r_hat corr "
+                      f"{np.mean([r['r_hat_score_corr'] for r in new_rows]):+.2f} "
                       f"({time.perf_counter() - t0:.0f} s)", flush=True)
+            between_chunks()
 
         ts, fs, kept = run_chunks(step, (init(keys), init_feedback(seeds), None), tc.num_chunks,
                                   tc.chunk_steps * tc.num_envs * len(seeds), progress_fn=progress_fn).state
@@ -158,7 +164,7 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
                 ev["selection"] = {"tested_chunk": int(kept_chunk[i]), "candidates": [
                     {"chunk": v["chunk"], "score": v["score"][i], "freeze_ratio": v["freeze_ratio"][i]}
                     for v in validations], "last_actor": {k: last_results[i][k] for k in SELECTION_METRICS}}
-            last = [r for r in training if r["condition"] == cond.name and r["seed"] == seed][-1]
+            last = [r for r in rows[cond.name] if r["seed"] == seed][-1]
             ev["feedback"] = {k: last[k] for k in ("feedback_total", "feedback_pos_total", "feedback_neg_total",
                                                    "credited_rows_total", "rm_updates_total", "r_hat_score_corr")}
             ev["train_wall_s"] = train_s
@@ -166,8 +172,24 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
             write_atomic(out / f"eval_{cond.name}_seed{seed}.json", json.dumps(ev, indent=2))
         wall[cond.name].append(train_s)
         write_atomic(done[cond.name], json.dumps({
-            "training": [r for r in training if r["condition"] == cond.name], "train_wall_s": train_s,
+            "training": rows[cond.name], "train_wall_s": train_s,
             "evals": {str(k): v for k, v in evals[cond.name].items()}}))
+
+    todo = []
+    for cond in cfg.conditions:
+        if done[cond.name].is_file():  # finished before an interruption (resume)
+            reward_models[cond.name], test_states[cond.name] = load_condition_models(out, cond.name, untrained)
+            kept = json.loads(done[cond.name].read_text())
+            rows[cond.name] = kept["training"]
+            evals[cond.name] = {int(k): v for k, v in kept["evals"].items()}
+            wall[cond.name].append(kept["train_wall_s"])
+            if progress:
+                print(f"[{cond.name}] kept from {done[cond.name]}", flush=True)
+        else:
+            todo.append(lambda between_chunks, cond=cond: train_condition(cond, between_chunks))
+    run_side_by_side(todo, at_once)
+    training = [r for c in cfg.conditions for r in rows[c.name]]
+    test_states = {c.name: test_states[c.name] for c in cfg.conditions}  # the conditions' order, whoever finished first
     for name, per_seed in (pooled or pooled_corr)(ft, reward_models, untrained, test_states).items():
         for i, seed in enumerate(cfg.seeds):
             evals[name][seed].update(per_seed[i])
@@ -175,12 +197,11 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     return Trained(training, evals, wall)
 
 
-def memory_per_seed(cfg: Table2Config, env, ft) -> dict[str, int]:
+def memory_per_seed(cfg: Table2Config, env, ft, at_once: int = 1) -> dict[str, int]:
     """Bytes one seed of a table2 run holds at its peak, by part, from abstract shapes (`jax.eval_shape`: nothing
-    is allocated): the learner's state with its replay and the feedback state of the condition training now
-    (conditions run one after another), the kept snapshot (train.select_every_chunks), the test episodes' signals
-    and env states, and what the run keeps of every condition until the end (reward models, sampled test
-    states)."""
+    is allocated): the learner's state with its replay and the feedback state of each of the `at_once`
+    conditions training now, their kept snapshots (train.select_every_chunks) and test episodes' signals and env
+    states, and what the run keeps of every condition until the end (reward models, sampled test states)."""
     from mjx_protamer.experiments.memory import tree_bytes
 
     pre = cfg.pretrain
@@ -192,9 +213,9 @@ def memory_per_seed(cfg: Table2Config, env, ft) -> dict[str, int]:
     floats = env.observation_size + env.action_size + len(env.reward_term_names) + 8 + 3  # a step's signals
     test = episodes * (steps * (floats + 3) * 4 + tree_bytes(jax.eval_shape(env.reset, key)))
     sampled = episodes * (-(-steps // STATE_STRIDE)) * (env.observation_size + env.action_size + 1) * 4
-    return {"learner state and replay": tree_bytes(learner), "feedback state": tree_bytes(feedback),
-            "kept snapshot": tree_bytes(learner.actor_params) if tc.select_every_chunks > 0 else 0,
-            "test episodes": test,
+    return {"learner state and replay": at_once * tree_bytes(learner), "feedback state": at_once * tree_bytes(feedback),
+            "kept snapshot": at_once * tree_bytes(learner.actor_params) if tc.select_every_chunks > 0 else 0,
+            "test episodes": at_once * test,
             "kept per condition": len(cfg.conditions) * (tree_bytes(feedback.rm_params) + sampled)}
 
 
