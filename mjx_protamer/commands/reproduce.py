@@ -48,7 +48,8 @@ def register(subparsers) -> None:
     t.add_argument("--conditions-at-once", default=None, metavar="K",
                    help="conditions trained at the same time in this process, each on a host thread (default 2: on "
                    "a 2-core CPU a second condition fills the cores the first leaves idle, 0.78-0.83 of the time "
-                   "one after the other); every condition computes what it would alone")
+                   "one after the other; one at a time on several devices, whose collectives two programs could interleave); every "
+                   "condition computes what it would alone")
     d = add_process_flags(t, "jax.distributed: each process trains a share of the conditions and seeds (--split) into "
                           "OUT/process_<k>; process 0 gathers the results and writes the table and figures into OUT. "
                           "`protamer launch` sets these for local processes; --resume continues every process",

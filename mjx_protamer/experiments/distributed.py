@@ -286,10 +286,10 @@ def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resum
         if pool_at_0:
             with alone():
                 pool_shares.pool_shares(cfg, kept["ft"], shares, blobs, merged.evals)
-        return _write_merged(cfg, out, merged, parts, layout, time.perf_counter() - t_all, at_once)
+        return _write_merged(cfg, out, merged, parts, layout, time.perf_counter() - t_all)
 
 
-def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: float, at_once: int) -> dict:
+def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: float) -> dict:
     """Process 0: what one process writes for the whole run, from every process's part; processes.json and
     table2.json's `processes` say which process trained which conditions and seeds, and for how long."""
     import yaml
@@ -305,7 +305,7 @@ def _write_merged(cfg, out: Path, merged, parts: list, layout: dict, total_s: fl
     extra = {"processes": {**layout, "dirs": [process_dir(out, k).name for k in range(layout["count"])],
                            "train_wall_s": {c.name: [sum(p.wall[c.name]) if c.name in p.wall else None
                                                      for p in parts] for c in cfg.conditions}},
-             "conditions_at_once": at_once}
+             "conditions_at_once": max(p.at_once for p in parts)}
     return write_table2(cfg, out, merged, total_s, extra)
 
 

@@ -46,7 +46,7 @@ def run_side_by_side(jobs: Sequence[Callable[[Callable[[], None]], T]], at_once:
             first_chunk.wait()
         while not stop.is_set():
             with take:
-                i = next(queue, None)
+                i = None if stop.is_set() else next(queue, None)
             if i is None:
                 return
             try:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
 import time
 from pathlib import Path
 
@@ -48,7 +49,8 @@ def run_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool =
     continues it."""
     t_all = time.perf_counter()
     trained = train_table2(cfg, out_dir, progress, resume, at_once=at_once)
-    return write_table2(cfg, out_dir, trained, time.perf_counter() - t_all, {"conditions_at_once": at_once})
+    return write_table2(cfg, out_dir, trained, time.perf_counter() - t_all,
+                        {"conditions_at_once": trained.at_once})
 
 
 @dataclasses.dataclass
@@ -59,6 +61,7 @@ class Trained:
     training: list[dict]
     evals: dict[str, dict[int, dict]]
     wall: dict[str, list[float]]
+    at_once: int = 1  # conditions that trained at a time (at most those left to train)
 
 
 def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool = False, pooled=None,
@@ -90,9 +93,12 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     from mjx_protamer.agents.ddpg.train import resolve_devices
     from mjx_protamer.experiments import memory
 
-    at_once = max(1, min(at_once, len(cfg.conditions)))
-    memory.check_seeds_fit(memory_per_seed(cfg, env, ft, at_once), len(cfg.seeds),
-                           resolve_devices(tc.num_devices),
+    devices = resolve_devices(tc.num_devices)
+    left = [c for c in cfg.conditions if not (resume and done[c.name].is_file())]
+    # Several devices: each chunk is a shard_map with collectives, and two programs issuing theirs from two threads
+    # could wait on each other across the devices; one condition at a time there
+    at_once = max(1, min(at_once, len(left), 1 if len(devices) > 1 else len(left)))
+    memory.check_seeds_fit(memory_per_seed(cfg, env, ft, at_once), len(cfg.seeds), devices,
                            f"reproduce table2 ({len(cfg.conditions)} conditions, {at_once} at a time)",
                            "lower ddpg.replay_size, train.num_envs or train.eval_episodes, or train fewer "
                            "conditions at once (--conditions-at-once 1)")
@@ -116,6 +122,7 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
     reward_models: dict[str, object] = {}
     test_states: dict[str, dict] = {}
     rows: dict[str, list[dict]] = {c.name: [] for c in cfg.conditions}  # training rows, joined in order at the end
+    saving = threading.Lock()
 
     def train_condition(cond, between_chunks) -> None:
         """Train, test and save one condition on every seed; `between_chunks` (side_by_side) may stop it."""
@@ -155,8 +162,9 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
         # paired difference on one training run, not a comparison across runs
         last_results = None if kept is None else evaluate_seeds(ts.actor_params, fs.rm_params, untrained)[0]
         reward_models[cond.name] = fs.rm_params
-        save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name],
-                               {"actor": tested, "critic": ts.critic_params})
+        with saving:  # one orbax save at a time
+            save_condition_models(out, cond.name, fs.rm_params, test_states[cond.name],
+                                   {"actor": tested, "critic": ts.critic_params})
         kept_chunk = None if kept is None else np.asarray(kept.chunk)
         for i, seed in enumerate(cfg.seeds):
             ev = results[i]
@@ -194,7 +202,7 @@ def train_table2(cfg: Table2Config, out_dir, progress: bool = True, resume: bool
         for i, seed in enumerate(cfg.seeds):
             evals[name][seed].update(per_seed[i])
             write_atomic(out / f"eval_{name}_seed{seed}.json", json.dumps(evals[name][seed], indent=2))
-    return Trained(training, evals, wall)
+    return Trained(training, evals, wall, at_once)
 
 
 def memory_per_seed(cfg: Table2Config, env, ft, at_once: int = 1) -> dict[str, int]:
