@@ -238,7 +238,7 @@ def hand_to_process_0(work: str, share) -> list:
 
 def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resume: bool = False,
                          claim_kind: str = "table2", own: tuple[str, ...] = (), split: str = "both",
-                         at_once: int = 2) -> dict | None:
+                         at_once: int | None = None) -> dict | None:
     """This process's part of a table2 run on `spec`'s job: join, claim `out` (process 0) and `out/process_<k>`,
     train its share of the conditions and seeds (`work_split.split_work`), hand the results to process 0.
     Process 0 returns `write_table2`'s result for the whole run (written into `out`), the others None. Raises
@@ -275,7 +275,8 @@ def run_table2_processes(cfg, out, spec: Processes, progress: bool = True, resum
         with claimed(mine, claim_kind, resume=resume, own=own), alone():
             # a process whose directory holds no run yet (it had not started) starts its share now
             trained = T2.train_table2(mine_cfg, mine, progress, resume and (mine / "config.yaml").is_file(),
-                                      pooled=keep_for_process_0 if pool_at_0 else None, at_once=at_once)
+                                      pooled=keep_for_process_0 if pool_at_0 else None,
+                                      at_once=T2.AT_ONCE if at_once is None else at_once)
         parts = [T2.Trained(**p) for p in hand_to_process_0("table2", dataclasses.asdict(trained))]
         blobs = gather_bytes(kept["blob"]) if pool_at_0 else None
         if index != 0:
