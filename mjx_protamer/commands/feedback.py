@@ -36,7 +36,8 @@ def register(subparsers) -> None:
                    help="a pretrain run directory or checkpoint in it (not with --resume / --replay)")
     p.add_argument("--config", type=Path, default=None, help="feedback YAML (default: configs/feedback_keyboard.yaml; "
                    "the channel follows --feedback); its session section, and of its pretrain section the DDPG keys "
-                   "reward_alpha, reward_beta, human_actor_coef, human_actor_lr, anchor_coef, actor_lr, critic_lr "
+                   "reward_alpha, reward_beta, human_actor_coef, human_actor_lr, anchor_coef, anchor_release_events, "
+                   "actor_lr, critic_lr "
                    "apply; the rest is the checkpoint's")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a feedback config value, e.g. --set feedback.credit.scheme=time_window or "

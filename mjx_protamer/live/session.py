@@ -137,6 +137,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
               + (f", the actor biased by {d.human_actor_coef:g} r_hat" if d.human_actor_coef else "")
               + (f" at its own step size {d.human_actor_lr:g}" if d.human_actor_coef and d.human_actor_lr else "")
               + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
+              + (f" until {d.anchor_release_events} events have taught it" if d.anchor_coef
+                 and d.anchor_release_events else "")
               + f"; feedback config {spec.config_path or 'the built-in defaults'}", flush=True)
 
     if getattr(learner, "attention", None) is not None:

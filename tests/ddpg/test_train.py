@@ -8,6 +8,7 @@ import json
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from mjx_protamer.agents.ddpg.train import make_train
 from mjx_protamer.envs.toy import PointReachEnv
@@ -135,6 +136,35 @@ def test_action_biasing_on_its_own_step_size_moves_the_actor_when_actor_lr_is_ti
                                                                     human_actor_lr=1e-2))
     no_model = make_train(own_config, PointReachEnv()).init(jax.random.PRNGKey(0))
     assert no_model.human_opt_state is not None
+
+
+def test_the_anchor_holds_the_actor_by_its_weight():
+    """`ddpg.anchor_coef`: a pull toward the actor the run started from. At weight 1 a strong anchor holds the
+    actor against the person's term; the state's `anchor_weight` at 0 lets it climb r_hat as an unanchored
+    actor does (a live session lowers it as the person teaches: live/tamer.py)."""
+    base = tiny_config(total_env_steps=200, warmup_env_steps=40)
+    w = jnp.array([1.0, -1.0], jnp.float32)
+    human = lambda params, obs, action: action @ params["w"]
+    obs = jax.random.normal(jax.random.PRNGKey(5), (64, PointReachEnv().observation_size))
+
+    def moved(anchor_coef, weight=None):
+        config = dataclasses.replace(base, ddpg=dataclasses.replace(base.ddpg, actor_lr=1e-2, human_actor_coef=1.0,
+                                                                    anchor_coef=anchor_coef))
+        trainer = make_train(config, PointReachEnv(), human_reward_fn=human)
+        state = trainer.init(jax.random.PRNGKey(0))
+        if weight is not None:
+            state = state.replace(anchor_weight=jnp.float32(weight))
+        before = trainer.act(state.actor_params, obs)
+        state, _ = trainer.train_chunk(state, {"w": w})
+        return float(jnp.mean((trainer.act(state.actor_params, obs) - before) @ w)), state
+
+    free, free_state = moved(0.0)
+    held, held_state = moved(1000.0)
+    released, _ = moved(1000.0, weight=0.0)
+    assert free_state.anchor_params is None and free_state.anchor_weight is None
+    assert float(held_state.anchor_weight) == 1.0
+    assert free > 0.2 and abs(held) < 0.2 * free, (free, held)
+    assert released == pytest.approx(free, rel=0.05), (free, released)
 
 
 def test_train_vmaps_over_seeds():

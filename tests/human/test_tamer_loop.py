@@ -144,3 +144,26 @@ def test_tamer_with_simulated_keyboard_teacher_moves_behaviour_its_way():
             assert learner.events > 100
     print(f"mean vertical action: DDPG {vertical[False]:+.3f}, DDPG+DeepTAMER {vertical[True]:+.3f}")
     assert vertical[True] > vertical[False] + 0.15
+
+
+def test_the_anchor_lets_go_as_the_person_teaches_and_holds_a_session_nobody_speaks_to():
+    """`ddpg.anchor_release_events`: each event the reward model learns from takes 1/N off the anchor's weight
+    (in the train state, so a save and a replay keep it); without feedback it stays 1. A new weight is a new
+    value of a traced input, not a new compile of the chunk."""
+    anchored = RULE + ["pretrain.ddpg.anchor_coef=0.5", "pretrain.ddpg.anchor_release_events=40"]
+    learner, cfg, env, clock = toy_learner(anchored, warmup_env_steps=100)
+    teacher = teacher_for(learner, cfg, env, clock)
+    assert float(learner.state.anchor_weight) == 1.0
+    used, weights = 0, []
+    for _ in range(3):
+        _, outcomes = run_chunk(learner, clock, [teacher], extra=5)
+        used += sum(o.why is None for o in outcomes)
+        weights.append(float(learner.state.anchor_weight))
+        assert weights[-1] == pytest.approx(max(0.0, 1.0 - used / 40), abs=1e-6)
+    assert used > 40 and weights[-1] == 0.0 and weights[0] > 0.0  # it fell event by event, then to 0
+    assert learner.trainer.collect_chunk._cache_size() == 1 and learner.trainer.extra_updates._cache_size() == 1
+
+    silent, _, _, silent_clock = toy_learner(anchored, use_model=False, warmup_env_steps=100)
+    for _ in range(2):
+        run_chunk(silent, silent_clock, extra=5)
+    assert float(silent.state.anchor_weight) == 1.0

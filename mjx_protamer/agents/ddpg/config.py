@@ -80,6 +80,11 @@ class DDPGConfig:
     # A pull of the actor toward the actor the run started from (a session: its checkpoint's), weighing
     # `anchor_coef * |mu(s) - mu_0(s)|^2`: bounds what the intrinsic reward alone changes in a session.
     anchor_coef: float = 0.0
+    # How many of a session's feedback events let the anchor go (0: it never does): its weight falls from 1 by
+    # 1/N with each event the reward model learns from. A session nobody speaks to stays anchored (it keeps
+    # what the checkpoint did); once a person teaches, the intrinsic reward and the person's term move the
+    # actor freely (docs/human_feedback.md, "Holding still until the person speaks").
+    anchor_release_events: int = 0
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -104,6 +109,8 @@ class DDPGConfig:
         check(self.human_actor_lr >= 0.0, "human_actor_lr",
               f"must be >= 0 (0: action biasing shares the actor's optimiser), got {self.human_actor_lr}")
         check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
+        check(self.anchor_release_events >= 0, "anchor_release_events",
+              f"must be >= 0 (0: the anchor never lets go), got {self.anchor_release_events}")
         check(self.replay_size >= self.batch_size, "replay_size",
               f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")
 

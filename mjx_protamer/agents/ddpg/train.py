@@ -63,6 +63,9 @@ class TrainState:
     episode_return: jax.Array  # (num_envs,) return of each env's running episode
     # the actor `ddpg.anchor_coef` pulls toward (None without an anchor: checkpoints of such runs hold no copy)
     anchor_params: Any = None
+    # the anchor's weight, a float32 scalar in [0, 1] multiplying `anchor_coef` (None without an anchor): 1 for a
+    # run; a live session lowers it as the person teaches (`ddpg.anchor_release_events`, live/tamer.py)
+    anchor_weight: Any = None
     # action biasing's own Adam (`ddpg.human_actor_coef` and `ddpg.human_actor_lr` > 0: from the config alone, so a
     # saved run restores from its config.yaml; unused without a human reward model; None otherwise)
     human_opt_state: Any = None
@@ -94,6 +97,11 @@ class Trainer(NamedTuple):
     state_specs: Any  # TrainState of PartitionSpec prefixes (None when unsharded)
     # (train_state, human_params, n) -> train_state after n more updates (one device only; None when sharded)
     extra_updates: Callable | None = None
+
+
+def _anchor(ts: TrainState):
+    """(anchor params, weight) for the actor's loss, or None: a run without an anchor holds neither."""
+    return None if ts.anchor_params is None else (ts.anchor_params, ts.anchor_weight)
 
 
 def _learner(ts: TrainState) -> Learner:
@@ -212,6 +220,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             iteration=jnp.zeros((), jnp.int32),
             episode_return=jnp.zeros((local_envs,)),
             anchor_params=actor_params if dc.anchor_coef > 0 else None,
+            anchor_weight=jnp.ones((), jnp.float32) if dc.anchor_coef > 0 else None,
             human_opt_state=human_opt.init(actor_params) if human_opt is not None else None,
         ))
 
@@ -219,7 +228,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         """The step-size multiplier at `iteration` (`DDPGConfig.lr_final_fraction`, step_size.decay_scale)."""
         return decay_scale(iteration, tc.iterations, dc.lr_decay_from, dc.lr_final_fraction)
 
-    def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params, scale, anchor_params=None):
+    def _update(lr: Learner, key, buffer: replay.ReplayBuffer, human_params, scale, anchor=None):
         """One DDPG update from a fresh minibatch: critic, then actor against the new critic, then targets."""
         batch = replay.sample(buffer, local_key(key), local_batch)
         reward = losses.relabel(batch, weights, dc.reward_alpha, dc.reward_beta, human_reward_fn, human_params)
@@ -232,7 +241,8 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         critic_params = optax.apply_updates(lr.critic_params, jax.tree.map(lambda u: u * scale, c_updates))
 
         bias = (human_reward_fn, human_params, bias_coef) if bias_coef > 0 else None
-        anchor = (anchor_params, dc.anchor_coef) if anchor_params is not None and dc.anchor_coef > 0 else None
+        if anchor is not None:  # (params, weight) of the state -> (params, coef) of the loss
+            anchor = (anchor[0], dc.anchor_coef * anchor[1])
         own = human_opt is not None and bias is not None
         a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(
             lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs, dc.actor_preact_coef,
@@ -258,9 +268,9 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         )
         return new, jnp.stack([c_loss, a_loss, q_mean, jnp.mean(reward)])
 
-    def _updates(lr: Learner, key, buffer, human_params, scale, anchor_params):
+    def _updates(lr: Learner, key, buffer, human_params, scale, anchor):
         def body(lr, k):
-            return _update(lr, k, buffer, human_params, scale, anchor_params)
+            return _update(lr, k, buffer, human_params, scale, anchor)
         # Unrolled (up to 4 updates a loop iteration, so a high update-to-data ratio stays cheap to compile): the
         # 5-seed Table II chunk with 2 updates a step ran 8% faster than as a loop of 2, in an interleaved A/B
         # (docs/environment.md, "Table II's wall time"); XLA then fuses across the updates, which changes rounding
@@ -268,7 +278,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
                                  unroll=min(tc.updates_per_step, 4))
         return lr, jnp.sum(stats, axis=0), jnp.float32(tc.updates_per_step)
 
-    def _no_updates(lr: Learner, key, buffer, human_params, scale, anchor_params):
+    def _no_updates(lr: Learner, key, buffer, human_params, scale, anchor):
         return lr, jnp.zeros((4,)), jnp.float32(0.0)
 
     def _env_step(ts: TrainState, k_noise, k_random):
@@ -310,7 +320,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             learn = ts.iteration >= warmup_iterations
             lr, update_stats, n_updates = jax.lax.cond(
                 learn, _updates, _no_updates, _learner(ts), k_update, ts.replay, human_params,
-                _step_scale(ts.iteration), ts.anchor_params)
+                _step_scale(ts.iteration), _anchor(ts))
             ts = _with_learner(ts, lr)
         else:
             update_stats, n_updates = jnp.zeros((4,)), jnp.float32(0.0)
@@ -351,7 +361,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         def body(_, carry):
             lr, rng = carry
             rng, k = jax.random.split(rng)
-            lr, _ = _update(lr, k, ts.replay, human_params, _step_scale(ts.iteration), ts.anchor_params)
+            lr, _ = _update(lr, k, ts.replay, human_params, _step_scale(ts.iteration), _anchor(ts))
             return lr, rng
 
         lr, rng = jax.lax.fori_loop(0, n, body, (_learner(ts), ts.rng))
@@ -399,5 +409,5 @@ def _state_specs() -> TrainState:
         actor_opt_state=P(), critic_opt_state=P(),
         env_state=split, noise_state=split,
         replay=replay.ReplayBuffer(data=split, ptr=P(), size=P()),
-        rng=P(), iteration=P(), episode_return=split, anchor_params=P(), human_opt_state=P(),
+        rng=P(), iteration=P(), episode_return=split, anchor_params=P(), anchor_weight=P(), human_opt_state=P(),
     )
