@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from mjx_protamer.human.feedback_config import SESSION_DDPG_KEYS
 from mjx_protamer.live.spec import FEEDBACK_CHOICES, LEARNERS
 
 
@@ -36,9 +37,7 @@ def register(subparsers) -> None:
                    help="a pretrain run directory or checkpoint in it (not with --resume / --replay)")
     p.add_argument("--config", type=Path, default=None, help="feedback YAML (default: configs/feedback_keyboard.yaml; "
                    "the channel follows --feedback); its session section, and of its pretrain section the DDPG keys "
-                   "reward_alpha, reward_beta, human_actor_coef, human_actor_lr, anchor_coef, anchor_release_events, "
-                   "actor_lr, critic_lr "
-                   "apply; the rest is the checkpoint's")
+                   + ", ".join(SESSION_DDPG_KEYS) + " apply; the rest is the checkpoint's")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a feedback config value, e.g. --set feedback.credit.scheme=time_window or "
                    "--set pretrain.ddpg.human_actor_coef=0 or --set session.max_updates_per_step=4")
