@@ -131,7 +131,14 @@ def reward_fn(hidden: tuple[int, ...] = (256, 256), bounded: bool = False, ensem
 
     def apply(params, obs, action):
         out = net.apply(params, obs, action)
-        return out if ensemble == 1 else jnp.mean(out, axis=0) - pessimism * jnp.std(out, axis=0)
+        if ensemble == 1:
+            return out
+        mean = jnp.mean(out, axis=0)
+        # sqrt's gradient is infinite at 0, and members that agree exactly (tanh saturated at +-1 in float32) have
+        # a spread of 0: jnp.std made the actor's gradient through r_hat NaN there, and a live session's actor
+        # with it. The floor moves r_hat by at most 1e-6.
+        spread = jnp.sqrt(jnp.mean(jnp.square(out - mean), axis=0) + 1e-12)
+        return mean - pessimism * spread
 
     return apply
 

@@ -241,6 +241,24 @@ def test_an_ensemble_fits_every_member_and_pessimism_lowers_r_hat_where_they_dis
     assert np.mean(np.sign(model.predict(obs, act)) == target) > 0.95
 
 
+def test_a_pessimistic_ensemble_whose_members_agree_gives_the_actor_a_finite_gradient():
+    """Members that agree exactly (here: the same weights) have a spread of 0; the actor climbs r_hat through its
+    action, so r_hat's gradient must stay finite there (jnp.std's was NaN, and a live session's actor went NaN
+    with it: the twelfth session's ensemble screen)."""
+    ens = RewardMLP((16, 16), True, 2)
+    params = ens.init(jax.random.PRNGKey(0), jnp.zeros((1, OBS)), jnp.zeros((1, ACT)))
+    same = jax.tree_util.tree_map(lambda x: jnp.stack([x[0], x[0]]), params)  # member 1 := member 0
+    obs = jnp.asarray(np.random.default_rng(1).normal(size=(8, OBS)), jnp.float32)
+    act = jnp.zeros((8, ACT), jnp.float32)
+    grad = jax.grad(lambda a: reward_fn((16, 16), True, 2, 1.0)(same, obs, a).sum())(act)
+    assert np.all(np.isfinite(np.asarray(grad)))
+    r = reward_fn((16, 16), True, 2, 1.0)(same, obs, act)
+    members = ens.apply(same, obs, act)
+    np.testing.assert_allclose(np.asarray(r), np.asarray(members[0]), atol=2e-6)
+    mean_grad = jax.grad(lambda a: ens.apply(same, obs, a).mean(0).sum())(act)
+    np.testing.assert_allclose(np.asarray(grad), np.asarray(mean_grad), rtol=1e-4, atol=1e-6)
+
+
 def test_pessimism_without_an_ensemble_is_refused():
     with pytest.raises(ConfigError, match="ensemble"):
         from_dict(RewardModelConfig, {"pessimism": 0.5})
