@@ -57,6 +57,9 @@ def register(subparsers) -> None:
     w.add_argument("--port", type=int, default=0, help="--view web: the port (default: a free one)")
     w.add_argument("--autosave-s", type=float, default=30.0,
                    help="save the learner, reward model and configs atomically this often (s; 0: only at exit)")
+    w.add_argument("--snapshot-every-s", type=float, default=0.0,
+                   help="save the policy every this many seconds of shown time into OUT/snapshots/step_<n> (what "
+                   "`reproduce live --snapshot-minutes` scores; 0: none)")
     w.add_argument("--resume", action="store_true", help="continue the session in --out (after a crash or stop)")
     w.add_argument("--fresh-replay", action="store_true",
                    help="start DDPG's replay empty instead of with the checkpoint's experience (the policy then "
@@ -127,6 +130,7 @@ def _finetune(args: argparse.Namespace) -> int:
         learner=args.learner, feedback=args.feedback, out=args.out, checkpoint=args.checkpoint, config=args.config,
         overrides=args.overrides, chunk_ms=args.chunk_ms, seconds=args.seconds, max_chunks=args.max_chunks,
         pace=not args.no_pace, view=_view(args), port=args.port, autosave_s=args.autosave_s,
+        snapshot_every_s=args.snapshot_every_s,
         fresh_replay=args.fresh_replay, calibrate=args.calibrate, listen_source=args.listen_source,
         voice_config=args.voice_config, voice_set=args.voice_set, keywords_only=args.keywords_only,
         save_segments=args.save_segments, coach_policy=args.coach_policy, coach_delay_s=args.coach_delay_s,

@@ -94,6 +94,8 @@ def register(subparsers) -> None:
     v.add_argument("--channels", default="keyboard", help="comma-separated: keyboard, prosody, whisper "
                    "(default keyboard)")
     v.add_argument("--minutes", default=2.0, help="shown time per session (default 2)")
+    v.add_argument("--snapshot-minutes", default=0.0, help="also score every session's policy at each multiple of "
+                   "this many minutes: the effect minute by minute (live_curve.png; default 0: the end only)")
     v.add_argument("--rule-config", type=Path, default=None, help="a table2 YAML whose hidden rule the teacher holds "
                    "(default: the built-in default's lateral rule)")
     v.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -242,6 +244,7 @@ def _live(args: argparse.Namespace) -> int:
         raise ConfigError(f"--channels: {', '.join(bad) or 'none given'}; use keyboard, prosody and/or whisper")
     check_config_file(args.rule_config, "--rule-config")
     minutes = number("--minutes", args.minutes, 0.01, 600)
+    snapshot_minutes = number("--snapshot-minutes", args.snapshot_minutes, 0.0, 600)
     episodes = number("--episodes", args.episodes, 1, 1000, integer=True)
     parallel = number("--parallel", args.parallel, 1, 64, integer=True)
     seeds = None if args.pretrain_seeds is None else number("--pretrain-seeds", args.pretrain_seeds, 2, 1000, True)
@@ -262,7 +265,7 @@ def _live(args: argparse.Namespace) -> int:
                 enable_compile_cache()
             checkpoints = pretrain_checkpoints(out, seeds) if seeds is not None else args.checkpoints
             plan = Plan(tuple(Path(c) for c in checkpoints), out, channels, minutes, 250.0, args.rule_config,
-                        tuple(args.overrides), episodes, parallel, args.learner)
+                        tuple(args.overrides), episodes, parallel, args.learner, snapshot_minutes)
             summary = run_live_effect(plan)
         except OSError as e:  # a full disk, no permission: one line
             from mjx_protamer.errors import write_failed
@@ -270,5 +273,6 @@ def _live(args: argparse.Namespace) -> int:
             raise write_failed(e, out, "the sessions finished before it are kept (their directories hold DONE)",
                                "run the same command again: it continues") from None
     print((out / "live_effect.md").read_text())
-    print(f"json {out / 'live_effect.json'}\nfigure {out / 'live_effect.png'}\nwall {summary['wall_s']:.0f} s")
+    figures = f"{out / 'live_effect.png'}" + (f", {out / 'live_curve.png'}" if "curve" in summary else "")
+    print(f"json {out / 'live_effect.json'}\nfigure {figures}\nwall {summary['wall_s']:.0f} s")
     return 0

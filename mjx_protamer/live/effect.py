@@ -13,7 +13,10 @@ Each final actor then runs the checkpoint's own test episodes (deterministic act
 hidden rule (`teacher_score`) and the paper's metrics. Per channel: the paired difference teacher - no feedback
 over checkpoints (mean, 95% CI, per checkpoint), the drift of the no-feedback sessions from the checkpoint, the
 freeze in both arms, and for the voice channels what the pipeline delivered of what the speaker said (latency,
-sign accuracy, misses). Finished sessions are kept: `--resume` continues.
+sign accuracy, misses). With `snapshot_minutes`, every session also saves its policy at each multiple of it
+(`finetune --snapshot-every-s`), and each snapshot is scored the same way: the paired difference minute by minute
+(`curve` in the JSON, live_curve.png), what a session of each length would have ended with. Finished sessions
+are kept: `--resume` continues.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ class Plan:
     episodes: int = 10
     parallel: int = 1  # unpaced sessions at once (paced ones always run alone)
     learner: str = "ddpg"  # or "coach": Deep COACH from the checkpoint's actor (its no-feedback arm is the start)
+    snapshot_minutes: float = 0.0  # every session's policy also scored at each multiple of this (a curve); 0: none
 
     @property
     def chunks(self) -> int:
@@ -66,6 +70,8 @@ def _session_argv(plan: Plan, ckpt: Path, arm: str, seed: int, out: Path) -> lis
             "--view", "none", "--chunk-ms", str(plan.chunk_ms), "--max-chunks", str(plan.chunks),
             "--autosave-s", "0", "--set", rule_override(plan.rule_config), "--set", f"feedback.seed={seed}"]
     argv += ["--learner", plan.learner]
+    if plan.snapshot_minutes > 0:
+        argv += ["--snapshot-every-s", str(plan.snapshot_minutes * 60.0)]
     if arm in ("none", "keyboard"):
         argv += ["--feedback", "none" if arm == "none" else "simulated:keyboard", "--no-pace"]
     else:  # the simulated speaker, at real-time pace, no more updates per shown step than the unpaced sessions
@@ -191,6 +197,8 @@ def run_live_effect(plan: Plan, log=print) -> dict:
         for arm in arms:
             d = plan.out / f"{arm}_{k}"
             row[arm] = {**score(final_actor(d, plan.learner)), **_session_facts(d)} if arm in ran else dict(row["start"])
+            if plan.snapshot_minutes > 0:
+                row[arm]["snapshots"] = _score_snapshots(d, score, start) if arm in ran else None
         rows.append(row)
         log(f"[live] checkpoint {k}: teacher score start {row['start']['teacher_score']:+.3f}, "
             + ", ".join(f"{a} {row[a]['teacher_score']:+.3f}" for a in arms))
@@ -207,10 +215,50 @@ def run_live_effect(plan: Plan, log=print) -> dict:
         if voice:
             summary["paired"][arm]["speaker"] = _pool_speaker(voice)
     summary["drift"] = {m: seed_stats([r["none"][m] - r["start"][m] for r in rows]) for m in METRICS}
+    if plan.snapshot_minutes > 0:
+        summary["curve"] = curve(rows, arms, plan.channels)
     write_atomic(plan.out / "live_effect.json", json.dumps(summary, indent=1))
     write_atomic(plan.out / "live_effect.md", markdown(summary))
     figure(summary, plan.out / "live_effect.png")
+    if "curve" in summary:
+        curve_figure(summary, plan.out / "live_curve.png")
     return summary
+
+
+def _score_snapshots(session: Path, score, like) -> list[dict]:
+    """Each snapshot of a session (`finetune --snapshot-every-s`) scored: [{step, minutes, metrics...}]."""
+    from mjx_protamer.experiments.checkpoints import load_model
+    from mjx_protamer.live.sinks import SNAPSHOTS, snapshot_steps
+
+    manifest = json.loads((session / "session.json").read_text())
+    dt = float(manifest["chunk_ms"]) / 1000.0 / int(manifest["chunk_steps"])
+    return [{"step": n, "minutes": round(n * dt / 60.0, 6),
+             **score(load_model(session / SNAPSHOTS / f"step_{n:08d}", like))} for n in snapshot_steps(session)]
+
+
+def curve(rows: list[dict], arms, channels) -> dict:
+    """Minute by minute (the snapshots every session has; minute 0 is the checkpoint): each arm pooled, and each
+    channel's paired difference to no feedback, with per-checkpoint values. An arm that ran no session (Deep
+    COACH's no-feedback arm) stays at the start."""
+    from mjx_protamer.experiments.stats import contrast, seed_stats
+
+    ran = [a for a in arms if rows[0][a].get("snapshots") is not None]
+    common = set.intersection(*({s["minutes"] for s in r[a]["snapshots"]} for r in rows for a in ran))
+    minutes = [0.0, *sorted(common)]
+
+    def at(row, arm, minute, metric):
+        if minute == 0.0 or row[arm].get("snapshots") is None:
+            return row["start"][metric]
+        return next(s[metric] for s in row[arm]["snapshots"] if s["minutes"] == minute)
+
+    out = {"minutes": minutes, "per_checkpoint": {}, "pooled": {}, "paired": {}}
+    for arm in arms:
+        out["per_checkpoint"][arm] = {m: [[at(r, arm, t, m) for t in minutes] for r in rows] for m in METRICS}
+        out["pooled"][arm] = {m: [seed_stats([at(r, arm, t, m) for r in rows]) for t in minutes] for m in METRICS}
+    for ch in channels:
+        out["paired"][ch] = {m: [contrast([at(r, "none", t, m) for r in rows], [at(r, ch, t, m) for r in rows])
+                                 ["paired"] if t > 0 else None for t in minutes] for m in METRICS}
+    return out
 
 
 def _pool_speaker(summaries: list[dict]) -> dict:
@@ -250,6 +298,18 @@ def markdown(summary: dict) -> str:
         f"{k}: start {r['start']['teacher_score']:+.2f}, " + ", ".join(
             f"{a} {r[a]['teacher_score']:+.2f}" for a in r if a not in ("checkpoint", "start"))
         for k, r in enumerate(summary["per_checkpoint"]))]
+    cv = summary.get("curve")
+    if cv:
+        lines += ["", "Minute by minute (the sessions' snapshots), teacher score, mean ± 95% CI:", "",
+                  "| minutes | " + " | ".join(cv["pooled"]) + " | " + " | ".join(f"paired {c} - none" for c in
+                                                                              cv["paired"]) + " |",
+                  "|---|" + "---|" * (len(cv["pooled"]) + len(cv["paired"]))]
+        for j, t in enumerate(cv["minutes"]):
+            cells = [_cell(cv["pooled"][a]["teacher_score"][j]) for a in cv["pooled"]]
+            cells += [_cell(cv["paired"][c]["teacher_score"][j]) if cv["paired"][c]["teacher_score"][j] else "-"
+                      for c in cv["paired"]]
+            lines.append(f"| {t:g} | " + " | ".join(cells) + " |")
+        lines.append("")
     for arm, c in summary["paired"].items():
         if "speaker" in c:
             s = c["speaker"]
@@ -290,6 +350,47 @@ def figure(summary: dict, path: Path) -> None:
     plan = summary["plan"]
     fig.suptitle(f"{len(rows)} checkpoints, {plan['minutes']:g} min sessions: mean ± 95% CI; grey, per checkpoint; "
                  "under a channel: paired difference to no feedback", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def curve_figure(summary: dict, path: Path) -> None:
+    """Left: the teacher score by minute of the session, without feedback and with each channel (mean ± 95% CI);
+    right: each channel's paired difference to no feedback by minute, per checkpoint in grey."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cv = summary["curve"]
+    t = np.asarray(cv["minutes"])
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4.2))
+    for i, arm in enumerate(cv["pooled"]):
+        st = cv["pooled"][arm]["teacher_score"]
+        mean = np.array([s["mean"] for s in st])
+        ci = np.array([s["ci95"] or 0.0 for s in st])
+        color = "k" if arm == "none" else f"C{3 + i}"
+        ax.plot(t, mean, marker="o", color=color, label="no feedback" if arm == "none" else arm)
+        ax.fill_between(t, mean - ci, mean + ci, color=color, alpha=0.15)
+    ax.set_xlabel("minutes of the session")
+    ax.set_ylabel("teacher score (hidden rule, test episodes)")
+    ax.legend(fontsize=8)
+    for i, ch in enumerate(cv["paired"]):
+        color = f"C{3 + i + 1}"
+        for a, b in zip(cv["per_checkpoint"][ch]["teacher_score"], cv["per_checkpoint"]["none"]["teacher_score"]):
+            bx.plot(t, np.subtract(a, b), color="0.8", lw=0.8, zorder=1)
+        st = cv["paired"][ch]["teacher_score"]
+        mean = np.array([0.0] + [s["mean"] for s in st[1:]])
+        ci = np.array([0.0] + [s["ci95"] or 0.0 for s in st[1:]])
+        bx.errorbar(t, mean, yerr=ci, color=color, marker="s", capsize=4, lw=2, label=f"{ch} - no feedback", zorder=2)
+    bx.axhline(0, color="0.5", lw=0.6)
+    bx.set_xlabel("minutes of the session")
+    bx.set_ylabel("paired difference in teacher score")
+    bx.legend(fontsize=8)
+    n = len(cv["per_checkpoint"]["none"]["teacher_score"])
+    fig.suptitle(f"{n} checkpoints: what a session has taught by each minute (its snapshots); mean ± 95% CI, "
+                 "grey per checkpoint", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -116,7 +116,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
     from mjx_protamer.errors import WriteFailed
     from mjx_protamer.live.loop import LoopResult, Stopper, run_loop
     from mjx_protamer.live.pace import UpdatePacer
-    from mjx_protamer.live.sinks import RecordSink, TerminalSink, ViewSink, calibration_prompt, start_view
+    from mjx_protamer.live.sinks import (RecordSink, SnapshotSink, TerminalSink, ViewSink, calibration_prompt,
+                                         start_view)
 
     view, why = start_view(spec.view, loaded.pre, learner.queue, spec.port)
     if view is None and why is not None:
@@ -128,6 +129,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
     record = RecordSink(recorder)
     view_sink = ViewSink(view, spec) if view is not None else None
     sinks = [TerminalSink(), record] + ([view_sink] if view_sink is not None else [])
+    if spec.snapshot_every_s > 0:
+        sinks.append(SnapshotSink(spec.out, round(spec.snapshot_every_s / learner.dt)))
     sc = spec.config.session
     pacer = UpdatePacer(learner.chunk_steps, learner.dt, sc.updates_per_step, sc.max_updates_per_step,
                         sc.spare_fraction, sc.unpaced_updates_per_step, paced=spec.pace and spec.live)

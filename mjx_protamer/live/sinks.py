@@ -96,6 +96,42 @@ class RecordSink:
         self.recorder.close()
 
 
+class SnapshotSink:
+    """The policy as it stands every `every_steps` shown steps (`--snapshot-every-s`), for a curve of what a
+    session has taught by each minute: OUT/snapshots/step_<n>/ (the deterministic actor, the same tree a final
+    save's actor is; checksummed, written once). A snapshot is taken after the chunk's drain and extra updates, so
+    the one at step n is the actor a session stopped after n steps ends with."""
+
+    def __init__(self, out, every_steps: int):
+        self.dir = out / SNAPSHOTS
+        self.every = max(1, int(every_steps))
+
+    def chunk(self, learner, chunk, outcomes, pace: dict) -> None:
+        from mjx_protamer.errors import WriteFailed
+        from mjx_protamer.experiments.checkpoints import save_model
+
+        end = learner.first_step  # steps shown after this chunk
+        if end // self.every == (end - learner.chunk_steps) // self.every:
+            return
+        where = self.dir / f"step_{end:08d}"
+        try:
+            save_model(where, learner.actor_params())
+        except Exception as e:  # OSError, or orbax's wrapping of one
+            raise WriteFailed(f"the snapshot {where} could not be written ({type(e).__name__}: {e})") from None
+
+    def close(self) -> None:
+        pass
+
+
+SNAPSHOTS = "snapshots"
+
+
+def snapshot_steps(session) -> list[int]:
+    """The steps at which a session's snapshots were taken, in order."""
+    d = session / SNAPSHOTS
+    return sorted(int(p.name[5:]) for p in d.glob("step_*") if p.name[5:].isdigit()) if d.is_dir() else []
+
+
 def start_view(kind: str, pre, queue, port: int):
     """The LiveView process (web page or window), or (None, reason) when it cannot start."""
     if kind == "none":

@@ -58,6 +58,7 @@ class SessionSpec:
     view: str = "none"
     port: int = 0
     autosave_s: float = 30.0
+    snapshot_every_s: float = 0.0  # the policy every this many shown seconds into OUT/snapshots (0: none)
     fresh_replay: bool = False
     calibrate: str | None = None
     listen_source: str = "mic"
@@ -94,7 +95,8 @@ class SessionSpec:
     @classmethod
     def create(cls, *, learner: str, feedback: str, out: Path | None, checkpoint: Path | None, config: Path | None,
                overrides=(), chunk_ms=250.0, seconds=0.0, max_chunks=0, pace=True, view: str = "none", port=0,
-               autosave_s=30.0, fresh_replay=False, calibrate=None, listen_source="mic", voice_config=None,
+               autosave_s=30.0, snapshot_every_s=0.0, fresh_replay=False, calibrate=None, listen_source="mic",
+               voice_config=None,
                voice_set=(), keywords_only=False, save_segments=None, coach_policy=None, coach_delay_s=0.3,
                coach_init="actor", coach_log_std=None) -> "SessionSpec":
         """A new session's spec from the command line's values; ConfigError (one line, exit 2) on a bad one."""
@@ -107,6 +109,7 @@ class SessionSpec:
         max_chunks = _number("--max-chunks", max_chunks, 0, 1e9, integer=True)
         port = _number("--port", port, 0, 65535, integer=True)
         autosave_s = _number("--autosave-s", autosave_s, 0.0, 1e6)
+        snapshot_every_s = _number("--snapshot-every-s", snapshot_every_s, 0.0, 1e7)
         coach_delay_s = _number("--coach-delay-s", coach_delay_s, 0.0, 10.0)
         if coach_log_std is not None:
             coach_log_std = _number("--coach-log-std", coach_log_std, -10.0, 2.0)
@@ -123,7 +126,8 @@ class SessionSpec:
         spec = cls(learner=learner, feedback=feedback, out=out or Path("runs") / time.strftime("finetune-%Y%m%d-%H%M%S"),
                    checkpoint=checkpoint, config_path=str(config) if config else None, overrides=tuple(overrides),
                    config=cfg, chunk_ms=chunk_ms, seconds=seconds, max_chunks=max_chunks, pace=pace, view=view,
-                   port=port, autosave_s=autosave_s, fresh_replay=fresh_replay, calibrate=calibrate,
+                   port=port, autosave_s=autosave_s, snapshot_every_s=snapshot_every_s, fresh_replay=fresh_replay,
+                   calibrate=calibrate,
                    listen_source=listen_source, voice_config=voice_config, voice_set=tuple(voice_set),
                    keywords_only=keywords_only, save_segments=save_segments, coach_policy=coach_policy,
                    coach_delay_s=coach_delay_s, coach_init=coach_init, coach_log_std=coach_log_std)
@@ -175,7 +179,7 @@ class SessionSpec:
                 "seeds": {"feedback": fb.seed}, "feedback_config": to_dict(fb), "run_config": to_dict(self.config),
                 "session_config": to_dict(self.config.session), "listen_source": self.listen_source,
                 "voice_config": self.voice_config, "voice_set": list(self.voice_set),
-                "keywords_only": self.keywords_only, "pace": self.pace,
+                "keywords_only": self.keywords_only, "pace": self.pace, "snapshot_every_s": self.snapshot_every_s,
                 "segments": str(self.save_segments or (self.out / "segments")) if self.voice else None,
                 "calibrate": self.calibrate,
                 "session_ddpg": self.ddpg_overrides() if self.learner == "ddpg" else None,
@@ -197,7 +201,9 @@ class SessionSpec:
             cfg = from_dict(FeedbackRunConfig, manifest["run_config"])  # as resolved then, whatever the file says now
             base = dict(learner=manifest["learner"], feedback=feedback, out=out, checkpoint=None,
                         config_path=manifest["config"], overrides=tuple(manifest["overrides"]), config=cfg,
-                        chunk_ms=float(manifest["chunk_ms"]), fresh_replay=not manifest.get("replay_from_checkpoint"),
+                        chunk_ms=float(manifest["chunk_ms"]),
+                        snapshot_every_s=float(manifest.get("snapshot_every_s") or 0.0),
+                        fresh_replay=not manifest.get("replay_from_checkpoint"),
                         calibrate=manifest.get("calibrate"), listen_source=manifest.get("listen_source", "mic"),
                         voice_config=manifest.get("voice_config"), voice_set=tuple(manifest.get("voice_set") or ()),
                         keywords_only=bool(manifest.get("keywords_only")),

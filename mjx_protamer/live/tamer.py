@@ -196,6 +196,10 @@ class TamerLearner(ChunkLearner):
     def predict(self, chunk: Chunk) -> np.ndarray | None:
         return self.model.predict(chunk.obs, chunk.action).reshape(-1) if self.use_model else None
 
+    def actor_params(self) -> dict:
+        """The deterministic policy as it stands (what a snapshot keeps)."""
+        return self.state.actor_params
+
     def status(self) -> dict:
         return {"events": self.events, "credited": self.credited, "updates": self.updates,
                 "r_hat_updates": self.model.updates if self.use_model else 0}

@@ -559,6 +559,26 @@ def test_replay_of_a_recorded_session_reaches_the_same_parameters_bit_for_bit(to
         [e.to_json() for e in FeedbackLog.read(again / "feedback.jsonl")]
 
 
+@pytest.mark.parametrize("learner", ["ddpg", "coach"])
+def test_a_snapshot_is_the_policy_a_session_stopped_there_ends_with(toy_run, tmp_path, learner):
+    """`--snapshot-every-s`: the policy saved after 5 of 10 chunks is bit for bit the final policy of the same
+    session stopped after 5 chunks, so a curve of snapshots says what sessions of each length would have taught."""
+    from mjx_protamer.experiments.checkpoints import load_model
+    from mjx_protamer.live.effect import final_actor
+    from mjx_protamer.live.sinks import SNAPSHOTS, snapshot_steps
+
+    long, short = tmp_path / "long", tmp_path / "short"
+    common = ["--learner", learner, "--feedback", "simulated:keyboard", "--checkpoint", toy_run, *TEACHER]
+    assert run_main(*common, "--out", long, "--max-chunks", "10", "--snapshot-every-s", "1.25") == 0
+    assert run_main(*common, "--out", short, "--max-chunks", "5") == 0
+    assert snapshot_steps(long) == [250, 500] and not (short / SNAPSHOTS).exists()
+    end_short, end_long = final_actor(short, learner), final_actor(long, learner)
+    at_250 = load_model(long / SNAPSHOTS / "step_00000250", end_short)
+    at_500 = load_model(long / SNAPSHOTS / "step_00000500", end_short)
+    assert _leaves_equal(at_250, end_short) and _leaves_equal(at_500, end_long)
+    assert not _leaves_equal(at_250, at_500)  # the session went on learning between them
+
+
 def test_replay_refuses_a_changed_checkpoint_and_a_missing_session(toy_run, tmp_path, capsys):
     import shutil
 

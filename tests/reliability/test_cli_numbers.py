@@ -46,6 +46,8 @@ CASES = {
                                    "{v}"], "--episodes", [*BAD.values(), FRACTION]),
     "reproduce live --parallel": (["reproduce", "live", "--checkpoints", "{run}", "--out", "{out}", "--parallel",
                                    "{v}"], "--parallel", list(BAD.values())),
+    "reproduce live --snapshot-minutes": (["reproduce", "live", "--checkpoints", "{run}", "--out", "{out}",
+                                           "--snapshot-minutes", "{v}"], "--snapshot-minutes", list(BAD.values())),
     "reproduce live --pretrain-seeds": (["reproduce", "live", "--pretrain-seeds", "{v}", "--out", "{out}"],
                                         "--pretrain-seeds", list(BAD.values())),
     "calibrate --n": (["calibrate", "--n", "{v}", "--out", "{out}"], "--n", [*BAD.values(), "0"]),

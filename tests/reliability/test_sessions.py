@@ -76,7 +76,8 @@ def test_a_session_directory_in_use_is_locked(tiny_run, tmp_path, capsys):
 
 @pytest.mark.parametrize("flag,value", [("--seconds", "-5"), ("--seconds", "nan"), ("--autosave-s", "nan"),
                                         ("--max-chunks", "-1"), ("--chunk-ms", "nan"), ("--chunk-ms", "1e12"),
-                                        ("--coach-delay-s", "nan"), ("--port", "70000")])
+                                        ("--coach-delay-s", "nan"), ("--port", "70000"),
+                                        ("--snapshot-every-s", "-1"), ("--snapshot-every-s", "inf")])
 def test_every_number_is_checked_like_a_config_value_before_loading(tiny_run, tmp_path, capsys, flag, value):
     code, err = finetune(capsys, "--feedback", "none", "--checkpoint", tiny_run[1], "--out", tmp_path / "o",
                          flag, value)
