@@ -96,6 +96,9 @@ class RecordSink:
         self.recorder.close()
 
 
+SNAPSHOTS = "snapshots"  # a session's snapshot folder (`--snapshot-every-s`)
+
+
 class SnapshotSink:
     """The policy as it stands every `every_steps` shown steps (`--snapshot-every-s`), for a curve of what a
     session has taught by each minute: OUT/snapshots/step_<n>/ (the deterministic actor, the same tree a final
@@ -121,9 +124,6 @@ class SnapshotSink:
 
     def close(self) -> None:
         pass
-
-
-SNAPSHOTS = "snapshots"
 
 
 def snapshot_steps(session) -> list[int]:
