@@ -107,6 +107,8 @@ def run_live_benchmark(args) -> dict:
             "updates_per_shown_step": pace.get("updates_per_step"),
             "updates_per_s": (pace["updates_per_step"] * shown_steps_s) if shown_steps_s and pace.get(
                 "updates_per_step") else None,
+            "chunk_base_ms": pace.get("chunk_base_ms"), "extra_update_ms": pace.get("extra_update_ms"),
+            "shown_chunk_ms": pace.get("shown_chunk_ms"),
             "view_frames_per_s": fps, "listener": speaker, "process_wall_s": time.time() - t0,
             "machine": {"cpus": os.cpu_count(), "load_avg_1m_at_end": os.getloadavg()[0], "python":
                         platform.python_version(), "processor": platform.processor() or platform.machine()},

@@ -49,6 +49,13 @@ class UpdatePacer:
         self.total_extra += extra
         self.chunks += 1
 
+    def costs(self) -> dict:
+        """The measured costs the pacer decides by (moving averages, ms): a chunk without its extra updates, and
+        one extra update; what bounds the updates a shown step can get on this machine."""
+        ms = lambda s: None if s is None else round(1000 * s, 2)
+        return {"chunk_base_ms": ms(self.base_s), "extra_update_ms": ms(self.update_s),
+                "shown_chunk_ms": round(1000 * self.shown_s, 2)}
+
     def updates_per_step(self) -> float:
         """Updates per shown step so far, the chunks' own and the extra ones."""
         if not self.chunks:

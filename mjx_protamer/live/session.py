@@ -192,7 +192,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         return _fail(write_error, 1)
     s = learner.status()
     pace = {**result.pace(learner.chunk_steps * learner.dt), "segment": segment, "paced": pacer.paced,
-            "updates_per_step": pacer.updates_per_step() if learner.kind == "ddpg" else None}
+            "updates_per_step": pacer.updates_per_step() if learner.kind == "ddpg" else None,
+            **(pacer.costs() if pacer.paced and learner.kind == "ddpg" else {})}
     _record_pace(spec.out, pace)
     ups = f", {pace['updates_per_step']:.2f} updates per shown step" if pace["updates_per_step"] is not None else ""
     rt = f", {pace['realtime']:.2f}x real time" if "realtime" in pace else ""

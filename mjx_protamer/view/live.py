@@ -21,6 +21,13 @@ import time
 
 KINDS = ("web", "window", "none")
 
+# The view serves the person; the session's time is the learner's. On a small CPU machine Mesa's llvmpipe
+# renders with a thread per core at the learner's priority and takes the spare time the pacer would spend on
+# extra updates (issue 39's pace), so the view process renders on one thread at a lower priority and draws
+# with what the learner and the listener leave.
+VIEW_NICE = 10
+VIEW_GL_THREADS = 1
+
 
 def default_kind() -> str:
     """window where a display exists, else web."""
@@ -114,7 +121,19 @@ def _reader(snapshots, player, stop: threading.Event) -> None:
     stop.set()
 
 
+def _yield_to_learner() -> None:
+    """Called first in the view process, before any GL context exists (Mesa reads LP_NUM_THREADS then)."""
+    import os
+
+    os.environ.setdefault("LP_NUM_THREADS", str(VIEW_GL_THREADS))
+    try:
+        os.nice(VIEW_NICE)
+    except OSError:  # pragma: no cover - a platform without nice; the view still works
+        pass
+
+
 def _main(kind, run_config, feedback_queue, snapshots, ready, port, token) -> None:
+    _yield_to_learner()
     try:
         if kind == "web":
             _serve_web(run_config, feedback_queue, snapshots, ready, port, token)

@@ -87,3 +87,22 @@ def test_window_view_without_a_display_is_a_clear_error(monkeypatch):
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     with pytest.raises(RuntimeError, match="needs a display .* use --view web"):
         LiveView("window", PretrainConfig(), FeedbackQueue())
+
+
+def test_the_view_process_draws_at_a_lower_priority_than_the_learner():
+    """On a small machine the page's renderer must take what the learner leaves, not the spare time the pacer
+    turns into updates (docs/human_feedback.md, the pace of a live session)."""
+    import os
+
+    from mjx_protamer.agents.ddpg.config import PretrainConfig
+    from mjx_protamer.human.queue import FeedbackQueue
+    from mjx_protamer.view.live import VIEW_NICE, LiveView
+
+    queue = FeedbackQueue()  # the session keeps it; the child unpickles it after start() returns
+    view = LiveView("web", PretrainConfig(env_name="toy"), queue)
+    try:
+        assert view.start().startswith("http://127.0.0.1:")
+        learner = os.getpriority(os.PRIO_PROCESS, 0)
+        assert os.getpriority(os.PRIO_PROCESS, view.process.pid) == min(19, learner + VIEW_NICE)
+    finally:
+        view.close()
