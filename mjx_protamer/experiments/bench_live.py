@@ -26,7 +26,7 @@ def add_arguments(p) -> None:
     p.add_argument("--seconds", type=float, default=60.0, help="shown time after the session is ready (default 60)")
     p.add_argument("--feedback", default="whisper", choices=("whisper", "prosody", "simulated:keyboard", "none"),
                    help="whisper/prosody: the simulated speaker through that listener; simulated:keyboard: no "
-                   "listener (default whisper)")
+                   "listener, and unpaced like every simulated teacher's session: the learner alone (default whisper)")
     p.add_argument("--view", default="web", choices=("web", "none"))
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="a session setting, e.g. --set session.max_updates_per_step=4")
