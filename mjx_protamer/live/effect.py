@@ -13,7 +13,10 @@ Each final actor then runs the checkpoint's own test episodes (deterministic act
 hidden rule (`teacher_score`) and the paper's metrics. Per channel: the paired difference teacher - no feedback
 over checkpoints (mean, 95% CI, per checkpoint), the drift of the no-feedback sessions from the checkpoint, the
 freeze in both arms, and for the voice channels what the pipeline delivered of what the speaker said (latency,
-sign accuracy, misses). With `snapshot_minutes`, every session also saves its policy at each multiple of it
+sign accuracy, misses). For DDPG + DeepTAMER each session's reward model is scored too (`r_hat_corr`: r_hat against
+the hidden score over the final actor's test steps, as table2's `r_hat_corr_test`; the no-feedback session's
+model, which took no event, is the baseline): whether the events taught the model, apart from whether the policy
+followed it. With `snapshot_minutes`, every session also saves its policy at each multiple of it
 (`finetune --snapshot-every-s`), and each snapshot is scored the same way: the paired difference minute by minute
 (`curve` in the JSON, live_curve.png), what a session of each length would have ended with. Finished sessions
 are kept: `--resume` continues.
@@ -120,14 +123,54 @@ def scorer(checkpoint: Path, rule_config, episodes: int):
     from mjx_protamer.experiments.table2 import load_table2_config
 
     pre, env, state, _ = load_run(checkpoint)
-    evaluate = jax.jit(make_evaluator(pre, env, load_table2_config(rule_config).feedback.teacher))
+    teacher = load_table2_config(rule_config).feedback.teacher
     keys = jax.random.split(jax.random.PRNGKey(eval_seed(pre)), episodes)
+    evaluators = {}  # per reward-model architecture (human.reward_model.reward_fn is one object per architecture)
 
-    def score(actor_params) -> dict:
-        ev = summarize(jax.device_get(evaluate(actor_params, keys)), pre.train.episode_length)
-        return {k: float(ev[k]) for k in METRICS}
+    def score(actor_params, reward_model=None) -> dict:
+        """The metrics of `actor_params`; with `reward_model` (apply, params) also `r_hat_corr`: how closely that
+        r_hat follows the hidden rule's score over the same test steps (None where either is constant)."""
+        apply, params = reward_model or (None, None)
+        if apply not in evaluators:
+            evaluators[apply] = jax.jit(make_evaluator(pre, env, teacher, apply))
+        models = {"session": params} if apply is not None else None
+        ev = summarize(jax.device_get(evaluators[apply](actor_params, keys, models)), pre.train.episode_length)
+        out = {k: float(ev[k]) for k in METRICS}
+        if apply is not None:
+            out["r_hat_corr"] = ev["r_hat_corr_session"]
+        return out
 
     return score, state.actor_params
+
+
+def session_reward_model(session: Path):
+    """(apply, params) of the reward model a DDPG + DeepTAMER session ended with (its newest save in
+    `reward_model/`); None for a session without one (Deep COACH)."""
+    import jax
+
+    from mjx_protamer.experiments import checkpoints
+    from mjx_protamer.experiments.run_loader import load_run
+    from mjx_protamer.live.record import read_manifest
+    from mjx_protamer.live.reward_model import SessionRewardModel
+    from mjx_protamer.live.spec import SessionSpec
+    from mjx_protamer.live.tamer import REWARD_MODEL_DIR
+
+    if not (session / REWARD_MODEL_DIR).is_dir():
+        return None
+    spec = SessionSpec.from_manifest(read_manifest(session), session)
+    fc, sc = spec.config.feedback, spec.config.session
+    env = load_run(session)[1]
+    model = SessionRewardModel(fc.reward_model, fc.credit, env.observation_size, env.action_size, fc.seed,
+                               spec.chunk_steps, sc.max_events_per_chunk, sc.rows_per_event)
+    steps = checkpoints.available_steps(session / REWARD_MODEL_DIR)
+    if not steps:
+        return None
+    mngr = checkpoints.manager(session / REWARD_MODEL_DIR)
+    try:  # the newest save: the one the DDPG state of final_actor comes from
+        state = checkpoints.restore(mngr, max(steps), jax.eval_shape(lambda: model.state))
+    finally:
+        mngr.close()
+    return model.apply, state.params
 
 
 def final_actor(session: Path, learner: str):
@@ -193,10 +236,17 @@ def run_live_effect(plan: Plan, log=print) -> dict:
 
     for k, ckpt in enumerate(plan.checkpoints):
         score, start = scorer(ckpt, plan.rule_config, plan.episodes)
-        row = {"checkpoint": str(ckpt), "start": score(start)}
+        models = {arm: session_reward_model(plan.out / f"{arm}_{k}") if plan.learner == "ddpg" else None
+                  for arm in ran}
+        # the start scored with the no-feedback session's reward model, which took no event (the untrained
+        # baseline of r_hat_corr; one evaluator compile per checkpoint)
+        row = {"checkpoint": str(ckpt), "start": score(start, models.get("none"))}
         for arm in arms:
             d = plan.out / f"{arm}_{k}"
-            row[arm] = {**score(final_actor(d, plan.learner)), **_session_facts(d)} if arm in ran else dict(row["start"])
+            if arm in ran:
+                row[arm] = {**score(final_actor(d, plan.learner), models[arm]), **_session_facts(d)}
+            else:
+                row[arm] = dict(row["start"])
             if plan.snapshot_minutes > 0:
                 row[arm]["snapshots"] = _score_snapshots(d, score, start) if arm in ran else None
         rows.append(row)
@@ -215,6 +265,10 @@ def run_live_effect(plan: Plan, log=print) -> dict:
         if voice:
             summary["paired"][arm]["speaker"] = _pool_speaker(voice)
     summary["drift"] = {m: seed_stats([r["none"][m] - r["start"][m] for r in rows]) for m in METRICS}
+    # whether the reward model learned the rule, apart from whether the policy followed it: r_hat against the
+    # hidden score on each arm's final test steps (the no-feedback arm's model never took an event: a baseline)
+    summary["r_hat_corr"] = {arm: seed_stats([r[arm]["r_hat_corr"] for r in rows])
+                             for arm in ("start", *ran) if all(r[arm].get("r_hat_corr") is not None for r in rows)}
     if plan.snapshot_minutes > 0:
         summary["curve"] = curve(rows, arms, plan.channels)
     write_atomic(plan.out / "live_effect.json", json.dumps(summary, indent=1))
@@ -294,6 +348,9 @@ def markdown(summary: dict) -> str:
         lines.append(f"| paired {arm} - none | " + " | ".join(
             _cell(c[m]["paired"]) if c[m]["paired"] else "-" for m in METRICS) + " |")
     lines.append("| drift: none - start | " + " | ".join(_cell(summary["drift"][m]) for m in METRICS) + " |")
+    if summary.get("r_hat_corr"):
+        lines += ["", "The session's reward model against the hidden rule (r_hat_corr on the final test steps): "
+                  + ", ".join(f"{arm} {_cell(st)}" for arm, st in summary["r_hat_corr"].items())]
     lines += ["", "Per checkpoint (teacher score): " + "; ".join(
         f"{k}: start {r['start']['teacher_score']:+.2f}, " + ", ".join(
             f"{a} {r[a]['teacher_score']:+.2f}" for a in r if a not in ("checkpoint", "start"))

@@ -554,6 +554,16 @@ def test_replay_of_a_recorded_session_reaches_the_same_parameters_bit_for_bit(to
     assert _leaves_equal(s1.actor_params, s2.actor_params) and _leaves_equal(s1.critic_params, s2.critic_params)
     assert tree_digest(session / "reward_model") == tree_digest(again / "reward_model")
     assert int(saved_reward_model(session)[0].updates) > 0
+    # the reward model `reproduce live` scores (r_hat_corr) is the one the session learned: it has picked up the
+    # teacher's rule (the sign of action 0) from the session's events
+    from mjx_protamer.experiments.stats import pearson
+    from mjx_protamer.live.effect import session_reward_model
+
+    apply, params = session_reward_model(session)
+    rng = np.random.default_rng(0)
+    obs = rng.normal(0.0, 0.1, (512, s1.replay.data.obs.shape[-1])).astype(np.float32)
+    action = rng.uniform(-1.0, 1.0, (512, s1.replay.data.action.shape[-1])).astype(np.float32)
+    assert pearson(np.asarray(apply(params, obs, action)), np.sign(action[:, 0])) > 0.5
     # the replayed log holds the same events
     assert [e.to_json() for e in FeedbackLog.read(session / "feedback.jsonl")] == \
         [e.to_json() for e in FeedbackLog.read(again / "feedback.jsonl")]
