@@ -230,7 +230,12 @@ def _paths_under(root: type, cls: type) -> list[str]:
     return seen.get(cls, [])
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    import argparse
+
+    argparse.ArgumentParser(prog="python -m mjx_protamer.config_reference",
+                            description=f"Write {PAGE.relative_to(ROOT)} from the config dataclasses' fields and "
+                            "comments.").parse_args(argv)
     PAGE.write_text(render())
     print(f"wrote {PAGE.relative_to(ROOT)}")
 

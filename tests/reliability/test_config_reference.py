@@ -81,3 +81,17 @@ def test_a_field_comment_is_the_lines_above_it_and_its_own():
     assert comments["action_filter_s"].startswith("Time constant (s) of the low-pass")
     assert comments["action_filter_s"].endswith("See docs/experiments.md for why 0.1 s.")
     assert comments["oscillator_hz"].startswith("Frequency (Hz)")  # not the comment of the field before
+
+
+def test_help_prints_what_the_command_does_and_writes_nothing(capsys, monkeypatch, tmp_path):
+    page = tmp_path / "config.md"
+    monkeypatch.setattr(ref, "PAGE", page)
+    monkeypatch.setattr(ref, "ROOT", tmp_path)
+    with pytest.raises(SystemExit) as exit_info:
+        ref.main(["--help"])
+    assert exit_info.value.code == 0 and "config.md" in capsys.readouterr().out and not page.exists()
+    with pytest.raises(SystemExit) as exit_info:
+        ref.main(["--bogus"])
+    assert exit_info.value.code == 2 and not page.exists()
+    ref.main([])
+    assert page.read_text() == ref.render()
