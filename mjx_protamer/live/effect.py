@@ -114,8 +114,8 @@ def _run_session(argv: list[str], out: Path, log=print) -> float:
 
 
 def scorer(checkpoint: Path, rule_config, episodes: int):
-    """score(actor_params) -> the rule's teacher_score and the paper's metrics on the checkpoint's test episodes
-    (the one evaluator, experiments/evaluate.py)."""
+    """(score, the checkpoint's actor, its env): score(actor_params) -> the rule's teacher_score and the paper's
+    metrics on the checkpoint's test episodes (the one evaluator, experiments/evaluate.py)."""
     import jax
 
     from mjx_protamer.experiments.evaluate import eval_seed, make_evaluator, summarize
@@ -140,16 +140,15 @@ def scorer(checkpoint: Path, rule_config, episodes: int):
             out["r_hat_corr"] = ev["r_hat_corr_session"]
         return out
 
-    return score, state.actor_params
+    return score, state.actor_params, env
 
 
-def session_reward_model(session: Path):
+def session_reward_model(session: Path, obs_size: int, action_size: int):
     """(apply, params) of the reward model a DDPG + DeepTAMER session ended with (its newest save in
-    `reward_model/`); None for a session without one (Deep COACH)."""
+    `reward_model/`); None for a session without one (Deep COACH). The sizes are the checkpoint env's."""
     import jax
 
     from mjx_protamer.experiments import checkpoints
-    from mjx_protamer.experiments.run_loader import load_run
     from mjx_protamer.live.record import read_manifest
     from mjx_protamer.live.reward_model import SessionRewardModel
     from mjx_protamer.live.spec import SessionSpec
@@ -159,8 +158,7 @@ def session_reward_model(session: Path):
         return None
     spec = SessionSpec.from_manifest(read_manifest(session), session)
     fc, sc = spec.config.feedback, spec.config.session
-    env = load_run(session)[1]
-    model = SessionRewardModel(fc.reward_model, fc.credit, env.observation_size, env.action_size, fc.seed,
+    model = SessionRewardModel(fc.reward_model, fc.credit, obs_size, action_size, fc.seed,
                                spec.chunk_steps, sc.max_events_per_chunk, sc.rows_per_event)
     steps = checkpoints.available_steps(session / REWARD_MODEL_DIR)
     if not steps:
@@ -232,12 +230,10 @@ def run_live_effect(plan: Plan, log=print) -> dict:
             for argv, d in jobs[arm]:
                 _run_session(argv, d, log)
     rows = []
-    from mjx_protamer.experiments.run_loader import load_run
-
     for k, ckpt in enumerate(plan.checkpoints):
-        score, start = scorer(ckpt, plan.rule_config, plan.episodes)
-        models = {arm: session_reward_model(plan.out / f"{arm}_{k}") if plan.learner == "ddpg" else None
-                  for arm in ran}
+        score, start, env = scorer(ckpt, plan.rule_config, plan.episodes)
+        models = {arm: session_reward_model(plan.out / f"{arm}_{k}", env.observation_size, env.action_size)
+                  if plan.learner == "ddpg" else None for arm in ran}
         # the start scored with the no-feedback session's reward model, which took no event (the untrained
         # baseline of r_hat_corr; one evaluator compile per checkpoint)
         row = {"checkpoint": str(ckpt), "start": score(start, models.get("none"))}

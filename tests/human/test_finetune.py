@@ -559,10 +559,11 @@ def test_replay_of_a_recorded_session_reaches_the_same_parameters_bit_for_bit(to
     from mjx_protamer.experiments.stats import pearson
     from mjx_protamer.live.effect import session_reward_model
 
-    apply, params = session_reward_model(session)
+    obs_size, action_size = s1.replay.data.obs.shape[-1], s1.replay.data.action.shape[-1]
+    apply, params = session_reward_model(session, obs_size, action_size)
     rng = np.random.default_rng(0)
-    obs = rng.normal(0.0, 0.1, (512, s1.replay.data.obs.shape[-1])).astype(np.float32)
-    action = rng.uniform(-1.0, 1.0, (512, s1.replay.data.action.shape[-1])).astype(np.float32)
+    obs = rng.normal(0.0, 0.1, (512, obs_size)).astype(np.float32)
+    action = rng.uniform(-1.0, 1.0, (512, action_size)).astype(np.float32)
     assert pearson(np.asarray(apply(params, obs, action)), np.sign(action[:, 0])) > 0.5
     # the replayed log holds the same events
     assert [e.to_json() for e in FeedbackLog.read(session / "feedback.jsonl")] == \
