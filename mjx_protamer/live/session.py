@@ -139,6 +139,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         print(f"[finetune] DDPG trains on {d.reward_alpha:g} r_env + {d.reward_beta:g} r_hat"
               + (f", the actor biased by {d.human_actor_coef:g} r_hat" if d.human_actor_coef else "")
               + (f" at its own step size {d.human_actor_lr:g}" if d.human_actor_coef and d.human_actor_lr else "")
+              + (f", climbing {d.human_critic_coef:g} x a critic of r_hat alone (gamma {d.human_critic_gamma:g})"
+                 if d.human_critic_coef else "")
               + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
               + (f" until {d.anchor_release_events} events have taught it" if d.anchor_coef
                  and d.anchor_release_events else "")

@@ -74,15 +74,20 @@ class TamerLearner(ChunkLearner):
 
     def start_from(self, loaded, replay_rows: int) -> None:
         """The pretrained learner on this session's fresh one-env state (env, noise and RNG are the session's):
-        networks and optimisers from `loaded`, the anchor at its actor, the replay seeded with its newest
+        networks and optimisers from `loaded`, the anchor at its actor, the critic of r_hat alone on its critic's
+        trunk, the replay seeded with its newest
         `replay_rows` transitions (0: empty). Why the replay: DDPG's first updates would otherwise fit the few
         dozen transitions of the first chunk and move the policy within seconds, feedback or not
         (docs/human_feedback.md)."""
         from mjx_protamer.agents.ddpg.replay import newest
+        from mjx_protamer.agents.ddpg.train import human_critic_from
 
         state = self.state.replace(**{k: getattr(loaded, k) for k in (
             "actor_params", "critic_params", "target_actor_params", "target_critic_params",
             "actor_opt_state", "critic_opt_state")})
+        if state.human_critic_params is not None:  # the critic of r_hat alone starts on the checkpoint's trunk
+            state = state.replace(human_critic_params=human_critic_from(loaded.critic_params),
+                                  target_human_critic_params=human_critic_from(loaded.critic_params))
         if state.anchor_params is not None:  # a copy: the actor's buffers are donated to every chunk
             state = state.replace(anchor_params=jax.tree.map(lambda x: jnp.array(x, copy=True), loaded.actor_params))
         if replay_rows:

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from mjx_protamer.agents.ddpg.networks import Critic
 from mjx_protamer.agents.ddpg.train import make_train
 from mjx_protamer.envs.toy import PointReachEnv
 from mjx_protamer.experiments.evaluate import eval_seed, evaluate, load_run
@@ -136,6 +137,36 @@ def test_action_biasing_on_its_own_step_size_moves_the_actor_when_actor_lr_is_ti
                                                                     human_actor_lr=1e-2))
     no_model = make_train(own_config, PointReachEnv()).init(jax.random.PRNGKey(0))
     assert no_model.human_opt_state is not None
+
+
+def test_a_critic_of_r_hat_alone_moves_the_actor_where_r_hat_has_no_action_gradient():
+    """`ddpg.human_critic_coef`: r_hat here rewards being further right and ignores the action, so action biasing
+    has nothing to climb; the critic of r_hat alone bootstraps it and learns that moving right leads there."""
+    base = tiny_config(total_env_steps=1000, warmup_env_steps=40)
+    human = lambda params, obs, action: obs[:, 0] * params["s"]
+    obs = jax.random.uniform(jax.random.PRNGKey(5), (256, PointReachEnv().observation_size), minval=-1, maxval=1)
+
+    def moved(**ddpg):  # the env's reward and r_hat out of the critic: only the person's terms teach the actor
+        config = dataclasses.replace(base, ddpg=dataclasses.replace(base.ddpg, actor_lr=1e-3, tau=0.05,
+                                                                    reward_alpha=0.0, reward_beta=0.0, **ddpg))
+        trainer = make_train(config, PointReachEnv(), human_reward_fn=human)
+        state = trainer.init(jax.random.PRNGKey(0))
+        before = trainer.act(state.actor_params, obs)[:, 0]
+        for _ in range(config.train.num_chunks):
+            state, _ = trainer.train_chunk(state, {"s": jnp.float32(1.0)})
+        return float(jnp.mean(trainer.act(state.actor_params, obs)[:, 0] - before)), state
+
+    with_critic, state = moved(human_critic_coef=1.0, human_critic_gamma=0.9)
+    biased, biased_state = moved(human_actor_coef=1.0)
+    assert with_critic > 0.5 and abs(biased) < 0.3, (with_critic, biased)
+    assert biased_state.human_critic_params is None
+    # it starts as the critic's trunk with a zero output, and from the config alone (unused without a model)
+    config = dataclasses.replace(base, ddpg=dataclasses.replace(base.ddpg, human_critic_coef=1.0))
+    fresh = make_train(config, PointReachEnv()).init(jax.random.PRNGKey(0))
+    critic = Critic(hidden=tuple(config.ddpg.critic_hidden))
+    assert float(jnp.abs(critic.apply(fresh.human_critic_params, obs, obs[:, :2])).max()) == 0.0
+    np.testing.assert_array_equal(fresh.human_critic_params["params"]["Dense_0"]["kernel"],
+                                  fresh.critic_params["params"]["Dense_0"]["kernel"])
 
 
 def test_the_anchor_holds_the_actor_by_its_weight():

@@ -77,6 +77,13 @@ class DDPGConfig:
     # reward alone changes in a session (a session without feedback has no other term); with its own optimiser
     # the person's term keeps this step size while actor_lr slows the rest (docs/human_feedback.md).
     human_actor_lr: float = 0.0
+    # A critic of r_hat alone (0: none): Q_h(s, a) = r_hat(s, a) + human_critic_gamma * Q_h(s', mu'(s')), learned
+    # beside the critic on the same minibatches, and the actor climbs `human_critic_coef * (1 - gamma_h) * Q_h`
+    # (r_hat's units). r_hat's own action gradient only ranks the actions at the step the person judged; Q_h ranks
+    # them by what they lead to. It starts as the critic's trunk with a zero output (losses.HumanTerm,
+    # train.human_critic_from). Its state follows from the config alone; unused without a human reward model.
+    human_critic_coef: float = 0.0
+    human_critic_gamma: float = 0.99
     # A pull of the actor toward the actor the run started from (a session: its checkpoint's), weighing
     # `anchor_coef * |mu(s) - mu_0(s)|^2`: bounds what the intrinsic reward alone changes in a session.
     anchor_coef: float = 0.0
@@ -108,6 +115,10 @@ class DDPGConfig:
         check(self.human_actor_coef >= 0.0, "human_actor_coef", f"must be >= 0, got {self.human_actor_coef}")
         check(self.human_actor_lr >= 0.0, "human_actor_lr",
               f"must be >= 0 (0: action biasing shares the actor's optimiser), got {self.human_actor_lr}")
+        check(self.human_critic_coef >= 0.0, "human_critic_coef",
+              f"must be >= 0 (0: no critic of r_hat alone), got {self.human_critic_coef}")
+        check(0.0 <= self.human_critic_gamma < 1.0, "human_critic_gamma",
+              f"must be in [0, 1), got {self.human_critic_gamma}")
         check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
         check(self.anchor_release_events >= 0, "anchor_release_events",
               f"must be >= 0 (0: the anchor never lets go), got {self.anchor_release_events}")

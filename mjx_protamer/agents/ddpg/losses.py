@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -11,6 +11,17 @@ from mjx_protamer.agents.ddpg.replay import Transition
 
 # human_reward_fn(human_params, obs (B, obs), action (B, act)) -> (B,) predicted human reward.
 HumanRewardFn = Callable[[Any, jax.Array, jax.Array], jax.Array]
+
+
+class HumanTerm(NamedTuple):
+    """What the actor climbs of the person's reward besides the critic's Q: `reward_coef * r_hat(s, mu(s))`
+    (action biasing) and `critic_coef * Q_h(s, mu(s))`, a critic of r_hat alone (`ddpg.human_critic_coef`)."""
+    reward_fn: HumanRewardFn
+    reward_params: Any
+    reward_coef: float
+    critic_apply: Callable | None = None
+    critic_params: Any = None
+    critic_coef: float = 0.0
 
 
 def relabel(
@@ -52,7 +63,7 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
     the action: the policy sticks in a corner of the action box. The penalty keeps it where it can learn.
     With `preact_free` > 0 it is a wall, not a pull: actions inside |a| < tanh(free) are not biased toward 0.
 
-    `human` = (human_reward_fn, human_params, coef): action biasing (Knox & Stone 2011; CREW's continuous Deep
+    `human` (a HumanTerm): action biasing (Knox & Stone 2011; CREW's continuous Deep
     TAMER): the actor also climbs `coef * r_hat(s, mu(s))` directly. Through the critic alone, r_hat reaches the
     policy only after the critic has bootstrapped it into Q, which a few minutes of feedback do not allow.
     `anchor` = (anchor_params, coef): `coef * mean |mu(s) - mu_anchor(s)|^2`, a pull toward the actor a session
@@ -71,10 +82,18 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
     return loss
 
 
-def human_bias_loss(action, obs, human) -> jax.Array:
-    """Action biasing's term of the actor loss: `-coef * mean r_hat(s, a)`, `human` = (fn, params, coef)."""
-    fn, params, coef = human
-    return -coef * jnp.mean(fn(params, obs, action))
+def human_bias_loss(action, obs, human: HumanTerm) -> jax.Array:
+    """The person's terms of the actor loss: `-reward_coef * mean r_hat(s, a) - critic_coef * mean Q_h(s, a)`.
+
+    r_hat's action gradient only says which nearby action the person likes at this very step; Q_h, trained on
+    r_hat with its own bootstrap, also says which action leads to what the person likes a moment later (a hand
+    that must travel to where the praise is)."""
+    loss = jnp.zeros(())
+    if human.reward_coef > 0:
+        loss = loss - human.reward_coef * jnp.mean(human.reward_fn(human.reward_params, obs, action))
+    if human.critic_coef > 0:
+        loss = loss - human.critic_coef * jnp.mean(human.critic_apply(human.critic_params, obs, action))
+    return loss
 
 
 def human_actor_loss(actor_params, actor_apply, obs: jax.Array, human: tuple) -> jax.Array:

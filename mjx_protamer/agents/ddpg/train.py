@@ -69,6 +69,11 @@ class TrainState:
     # action biasing's own Adam (`ddpg.human_actor_coef` and `ddpg.human_actor_lr` > 0: from the config alone, so a
     # saved run restores from its config.yaml; unused without a human reward model; None otherwise)
     human_opt_state: Any = None
+    # the critic of r_hat alone, its target and its Adam (`ddpg.human_critic_coef` > 0: from the config alone;
+    # unused without a human reward model; None otherwise)
+    human_critic_params: Any = None
+    target_human_critic_params: Any = None
+    human_critic_opt_state: Any = None
 
 
 class Learner(NamedTuple):
@@ -80,6 +85,9 @@ class Learner(NamedTuple):
     actor_opt_state: Any
     critic_opt_state: Any
     human_opt_state: Any = None
+    human_critic_params: Any = None
+    target_human_critic_params: Any = None
+    human_critic_opt_state: Any = None
 
 
 class Trainer(NamedTuple):
@@ -106,11 +114,22 @@ def _anchor(ts: TrainState):
 
 def _learner(ts: TrainState) -> Learner:
     return Learner(ts.actor_params, ts.critic_params, ts.target_actor_params, ts.target_critic_params,
-                   ts.actor_opt_state, ts.critic_opt_state, ts.human_opt_state)
+                   ts.actor_opt_state, ts.critic_opt_state, ts.human_opt_state, ts.human_critic_params,
+                   ts.target_human_critic_params, ts.human_critic_opt_state)
 
 
 def _with_learner(ts: TrainState, lr: Learner) -> TrainState:
     return ts.replace(**lr._asdict())
+
+
+def human_critic_from(critic_params):
+    """The critic of r_hat alone as it starts: the critic's trunk (what it learned of the body's dynamics) with a
+    zero output layer, so Q_h is 0 until the person's reward has been bootstrapped into it."""
+    layers = dict(critic_params["params"])
+    last = max(layers, key=lambda name: int(name.rsplit("_", 1)[1]))  # Dense_N: the output layer
+    layers[last] = jax.tree.map(jnp.zeros_like, layers[last])
+    trunk = jax.tree.map(lambda x: jnp.array(x, copy=True), {k: v for k, v in layers.items() if k != last})
+    return {**critic_params, "params": {**trunk, last: layers[last]}}
 
 
 def _strong(tree):
@@ -179,6 +198,8 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
     # reward's (DDPGConfig.human_actor_lr). Its state follows from the config alone, so that a saved run restores
     # from its config.yaml (a session without feedback carries it unused)
     human_opt = optax.adam(dc.human_actor_lr) if dc.human_actor_coef > 0 and dc.human_actor_lr > 0 else None
+    has_human_critic = dc.human_critic_coef > 0  # its state (from the config alone)
+    human_critic_coef = dc.human_critic_coef * (1.0 - dc.human_critic_gamma) if human_reward_fn is not None else 0.0
     warmup_iterations = tc.warmup_iterations
     # The region mask rides beside the transitions for teacher rules, never into the replay (it would grow
     # every row for a signal the learner never reads).
@@ -222,7 +243,13 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             anchor_params=actor_params if dc.anchor_coef > 0 else None,
             anchor_weight=jnp.ones((), jnp.float32) if dc.anchor_coef > 0 else None,
             human_opt_state=human_opt.init(actor_params) if human_opt is not None else None,
+            **(_fresh_human_critic(critic_params) if has_human_critic else {}),
         ))
+
+    def _fresh_human_critic(critic_params) -> dict:
+        params = human_critic_from(critic_params)
+        return dict(human_critic_params=params, target_human_critic_params=human_critic_from(critic_params),
+                    human_critic_opt_state=critic_opt.init(params))
 
     def _step_scale(iteration):
         """The step-size multiplier at `iteration` (`DDPGConfig.lr_final_fraction`, step_size.decay_scale)."""
@@ -232,15 +259,30 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         """One DDPG update from a fresh minibatch: critic, then actor against the new critic, then targets."""
         batch = replay.sample(buffer, local_key(key), local_batch)
         reward = losses.relabel(batch, weights, dc.reward_alpha, dc.reward_beta, human_reward_fn, human_params)
-        next_q = critic.apply(lr.target_critic_params, batch.next_obs,
-                              actor.apply(lr.target_actor_params, batch.next_obs))
+        next_action = actor.apply(lr.target_actor_params, batch.next_obs)
+        next_q = critic.apply(lr.target_critic_params, batch.next_obs, next_action)
         target_q = losses.td_target(reward, next_q, batch.terminal, dc.gamma)
         (c_loss, q_mean), c_grads = jax.value_and_grad(losses.critic_loss, has_aux=True)(
             lr.critic_params, critic.apply, batch, target_q)
         c_updates, critic_opt_state = critic_opt.update(pmean(c_grads), lr.critic_opt_state, lr.critic_params)
         critic_params = optax.apply_updates(lr.critic_params, jax.tree.map(lambda u: u * scale, c_updates))
 
-        bias = (human_reward_fn, human_params, bias_coef) if bias_coef > 0 else None
+        human_critic_params, human_critic_opt_state = lr.human_critic_params, lr.human_critic_opt_state
+        if human_critic_coef > 0:  # Q_h's own TD step on r_hat alone, the same minibatch and target actor
+            r_hat = jnp.reshape(human_reward_fn(human_params, batch.obs, batch.action), target_q.shape)
+            next_qh = critic.apply(lr.target_human_critic_params, batch.next_obs, next_action)
+            target_qh = losses.td_target(r_hat, next_qh, batch.terminal, dc.human_critic_gamma)
+            (_, _), h_grads = jax.value_and_grad(losses.critic_loss, has_aux=True)(
+                lr.human_critic_params, critic.apply, batch, target_qh)
+            h_updates, human_critic_opt_state = critic_opt.update(pmean(h_grads), lr.human_critic_opt_state,
+                                                                  lr.human_critic_params)
+            human_critic_params = optax.apply_updates(lr.human_critic_params,
+                                                      jax.tree.map(lambda u: u * scale, h_updates))
+
+        bias = None
+        if bias_coef > 0 or human_critic_coef > 0:
+            bias = losses.HumanTerm(human_reward_fn, human_params, bias_coef, critic.apply, human_critic_params,
+                                    human_critic_coef)
         if anchor is not None:  # (params, weight) of the state -> (params, coef) of the loss
             anchor = (anchor[0], dc.anchor_coef * anchor[1])
         own = human_opt is not None and bias is not None
@@ -265,6 +307,10 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
             actor_opt_state=actor_opt_state,
             critic_opt_state=critic_opt_state,
             human_opt_state=human_opt_state,
+            human_critic_params=human_critic_params,
+            target_human_critic_params=(losses.soft_update(lr.target_human_critic_params, human_critic_params, dc.tau)
+                                        if human_critic_coef > 0 else lr.target_human_critic_params),
+            human_critic_opt_state=human_critic_opt_state,
         )
         return new, jnp.stack([c_loss, a_loss, q_mean, jnp.mean(reward)])
 
@@ -410,4 +456,5 @@ def _state_specs() -> TrainState:
         env_state=split, noise_state=split,
         replay=replay.ReplayBuffer(data=split, ptr=P(), size=P()),
         rng=P(), iteration=P(), episode_return=split, anchor_params=P(), anchor_weight=P(), human_opt_state=P(),
+        human_critic_params=P(), target_human_critic_params=P(), human_critic_opt_state=P(),
     )
