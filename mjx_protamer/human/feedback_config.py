@@ -27,7 +27,8 @@ from mjx_protamer.human.teachers import TeacherConfig
 # reward weights, action biasing (its own step size, the critic of r_hat alone), the anchor and the step sizes. The rest (networks, env,
 # noise) is the checkpoint's. (Sessions recorded before 6 December took the two reward weights alone.)
 SESSION_DDPG_KEYS = ("reward_alpha", "reward_beta", "human_actor_coef", "human_actor_lr", "human_critic_coef",
-                     "human_critic_gamma", "anchor_coef", "anchor_release_events", "actor_lr", "critic_lr")
+                     "human_critic_gamma", "anchor_coef", "anchor_release_events", "anchor_praise_release",
+                     "actor_lr", "critic_lr")
 
 
 @dataclasses.dataclass(frozen=True)

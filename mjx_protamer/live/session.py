@@ -144,6 +144,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
               + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
               + (f" until {d.anchor_release_events} events have taught it" if d.anchor_coef
                  and d.anchor_release_events else "")
+              + (f" (a praise counting {d.anchor_praise_release:g})" if d.anchor_coef and d.anchor_release_events
+                 and d.anchor_praise_release < 1 else "")
               + f"; feedback config {spec.config_path or 'the built-in defaults'}", flush=True)
 
     if getattr(learner, "attention", None) is not None:

@@ -153,15 +153,17 @@ class TamerLearner(ChunkLearner):
         silent = self._silent_steps(self.last_chunk.t0 if self.last_chunk is not None else None)
         credits, self._credits = self._credits, []
         self.model.absorb(credits, silent)
-        self._release_anchor(len(credits))
+        self._release_anchor([value for _, _, value in credits])
 
-    def _release_anchor(self, taught: int) -> None:
-        """Each event the reward model learned from takes 1/`anchor_release_events` off the anchor's weight.
-        The weight lives in the train state (saved, restored and replayed with it), not in a host counter."""
-        n = self.config.ddpg.anchor_release_events
-        if not taught or n <= 0 or self.state.anchor_weight is None:
+    def _release_anchor(self, values: list[float]) -> None:
+        """Each event the reward model learned from takes 1/`anchor_release_events` off the anchor's weight, a
+        praise `anchor_praise_release` of that. The weight lives in the train state (saved, restored and
+        replayed with it), not in a host counter."""
+        d = self.config.ddpg
+        if not values or d.anchor_release_events <= 0 or self.state.anchor_weight is None:
             return
-        weight = max(0.0, float(self.state.anchor_weight) - taught / n)
+        taught = sum(1.0 if v < 0 else d.anchor_praise_release for v in values)
+        weight = max(0.0, float(self.state.anchor_weight) - taught / d.anchor_release_events)
         self.state = self.state.replace(anchor_weight=jax.device_put(np.float32(weight), jax.devices()[0]))
 
     def _silent_steps(self, now: float | None):

@@ -148,7 +148,8 @@ def test_tamer_with_simulated_keyboard_teacher_moves_behaviour_its_way():
 
 def test_the_anchor_lets_go_as_the_person_teaches_and_holds_a_session_nobody_speaks_to():
     """`ddpg.anchor_release_events`: each event the reward model learns from takes 1/N off the anchor's weight
-    (in the train state, so a save and a replay keep it); without feedback it stays 1. A new weight is a new
+    (in the train state, so a save and a replay keep it), a praise `anchor_praise_release` of that; without
+    feedback it stays 1. A new weight is a new
     value of a traced input, not a new compile of the chunk."""
     anchored = RULE + ["pretrain.ddpg.anchor_coef=0.5", "pretrain.ddpg.anchor_release_events=40"]
     learner, cfg, env, clock = toy_learner(anchored, warmup_env_steps=100)
@@ -162,6 +163,17 @@ def test_the_anchor_lets_go_as_the_person_teaches_and_holds_a_session_nobody_spe
         assert weights[-1] == pytest.approx(max(0.0, 1.0 - used / 40), abs=1e-6)
     assert used > 40 and weights[-1] == 0.0 and weights[0] > 0.0  # it fell event by event, then to 0
     assert learner.trainer.collect_chunk._cache_size() == 1 and learner.trainer.extra_updates._cache_size() == 1
+
+    # `ddpg.anchor_praise_release` 0: a praise keeps the anchor ("keep doing this"); only reproach lets it go
+    learner, cfg, env, clock = toy_learner(anchored + ["pretrain.ddpg.anchor_praise_release=0"],
+                                           warmup_env_steps=100)
+    teacher = teacher_for(learner, cfg, env, clock)
+    signs = []
+    for _ in range(2):
+        _, outcomes = run_chunk(learner, clock, [teacher], extra=5)
+        signs += [o.event.value > 0 for o in outcomes if o.why is None]
+        assert float(learner.state.anchor_weight) == pytest.approx(max(0.0, 1.0 - signs.count(False) / 40), abs=1e-6)
+    assert signs.count(True) > 5 and signs.count(False) > 0, signs
 
     silent, _, _, silent_clock = toy_learner(anchored, use_model=False, warmup_env_steps=100)
     for _ in range(2):

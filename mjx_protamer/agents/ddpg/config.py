@@ -83,7 +83,7 @@ class DDPGConfig:
     # them by what they lead to. It starts as the critic's trunk with a zero output (losses.HumanTerm,
     # train.human_critic_from). Its state follows from the config alone; unused without a human reward model.
     human_critic_coef: float = 0.0
-    human_critic_gamma: float = 0.99
+    human_critic_gamma: float = 0.99  # Q_h's discount per env step (0.99: the person's praise reaches ~0.5 s back)
     # A pull of the actor toward the actor the run started from (a session: its checkpoint's), weighing
     # `anchor_coef * |mu(s) - mu_0(s)|^2`: bounds what the intrinsic reward alone changes in a session.
     anchor_coef: float = 0.0
@@ -92,6 +92,10 @@ class DDPGConfig:
     # what the checkpoint did); once a person teaches, the intrinsic reward and the person's term move the
     # actor freely (docs/human_feedback.md, "Holding still until the person speaks").
     anchor_release_events: int = 0
+    # What a praise (an event of positive value) takes off the anchor, as a share of a reproach's 1/N: 1 every
+    # event alike; 0 only reproach lets the anchor go. Praise says "keep doing this": an infant the person is
+    # pleased with then keeps what it does instead of drifting with the intrinsic reward once released.
+    anchor_praise_release: float = 1.0
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -120,6 +124,8 @@ class DDPGConfig:
         check(0.0 <= self.human_critic_gamma < 1.0, "human_critic_gamma",
               f"must be in [0, 1), got {self.human_critic_gamma}")
         check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
+        check(0.0 <= self.anchor_praise_release <= 1.0, "anchor_praise_release",
+              f"must be in [0, 1] (1: a praise lets go as much as a reproach), got {self.anchor_praise_release}")
         check(self.anchor_release_events >= 0, "anchor_release_events",
               f"must be >= 0 (0: the anchor never lets go), got {self.anchor_release_events}")
         check(self.replay_size >= self.batch_size, "replay_size",
