@@ -100,6 +100,11 @@ class SessionConfig:
     # Unpaced sessions (replays of nothing, `reproduce live`): this many updates per shown step in all, the pace
     # issue 39 asks of a paced one (which makes about 1.3 with Whisper and the page on 2 cores: `protamer bench live`)
     unpaced_updates_per_step: float = 2.0
+    # DDPG on the person's clock (0: off, updates by the clock as above). With N > 0 the chunks make no updates of
+    # their own and each event the reward model takes buys N, made after its drain within what the pace allows per
+    # chunk (max_updates_per_step; a backlog carries over): a session nobody speaks to does not learn, and the
+    # intrinsic reward moves the actor only as far as the person's events pay for
+    updates_per_event: float = 0.0
     # the pretraining run's latest transitions a session's DDPG replay starts with (0: an empty replay)
     replay_from_checkpoint: int = 20_000
     max_events_per_chunk: int = 16  # feedback events credited per chunk (more are logged and dropped)
@@ -112,6 +117,8 @@ class SessionConfig:
         check(0.0 < self.spare_fraction <= 1.0, "spare_fraction", f"must be in (0, 1], got {self.spare_fraction}")
         check(self.unpaced_updates_per_step >= self.updates_per_step, "unpaced_updates_per_step",
               f"must be >= updates_per_step ({self.updates_per_step}), got {self.unpaced_updates_per_step}")
+        check(self.updates_per_event >= 0, "updates_per_event",
+              f"must be >= 0 (0: updates by the clock), got {self.updates_per_event}")
         check(self.replay_from_checkpoint >= 0, "replay_from_checkpoint",
               f"must be >= 0, got {self.replay_from_checkpoint}")
         check(self.max_events_per_chunk >= 1, "max_events_per_chunk", f"must be >= 1, got {self.max_events_per_chunk}")

@@ -90,6 +90,7 @@ def run_loop(spec, learner, sources, sinks, pacer, clock, stopper: Stopper, auto
             outcomes = learner.take_events(chunk.first_step + learner.chunk_steps - 1)
             for s in sources:
                 s.drained(outcomes)
+            extra = pacer.settle(extra, sum(o.why is None for o in outcomes))
             t_a = time.time()
             learner.extra_updates(extra)
             t_b = time.time()

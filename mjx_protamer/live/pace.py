@@ -5,8 +5,9 @@ updates, the feedback path, the view's snapshot) takes less on most machines; th
 `UpdatePacer` measures both per chunk (the base cost, and the cost of one extra update from the last chunk that
 made some) and gives the next chunk `spare_fraction` of the spare time in extra updates, within
 `max_updates_per_step` per shown step in all. Unpaced (`reproduce live`, a session shown as fast as it is
-computed) every chunk gets the fixed `unpaced_updates_per_step`. The count is decided before the chunk and
-recorded with it: a replay makes the same updates whatever its machine.
+computed) every chunk gets the fixed `unpaced_updates_per_step`. On the person's clock
+(`session.updates_per_event`) the count is what the chunk's events bought, within the same limits. The count is
+recorded with the chunk: a replay makes the same updates whatever its machine.
 """
 
 from __future__ import annotations
@@ -16,7 +17,11 @@ import math
 
 class UpdatePacer:
     def __init__(self, chunk_steps: int, dt: float, updates_per_step: int, max_updates_per_step: float,
-                 spare_fraction: float, unpaced_updates_per_step: float, paced: bool):
+                 spare_fraction: float, unpaced_updates_per_step: float, paced: bool, updates_per_event: float = 0.0):
+        self.per_event = updates_per_event
+        self.owed = 0.0  # updates the person's events have bought and the pace has not yet allowed
+        if updates_per_event > 0:  # the chunks make none of their own (live/tamer.py)
+            updates_per_step = 0
         self.shown_s = chunk_steps * dt
         self.max_extra = max(0, int(math.floor((max_updates_per_step - updates_per_step) * chunk_steps)))
         self.unpaced_extra = max(0, int(round((unpaced_updates_per_step - updates_per_step) * chunk_steps)))
@@ -30,15 +35,25 @@ class UpdatePacer:
         self.chunks = 0
 
     def next(self) -> int:
-        """Extra updates for the coming chunk."""
+        """Extra updates for the coming chunk (with `updates_per_event`, the most it may make: `settle`)."""
         if not self.paced:
-            return self.unpaced_extra
+            return self.max_extra if self.per_event > 0 else self.unpaced_extra
         if self.base_s is None:
             return 0  # the first chunk measures the base cost
         if self.update_s is None:
             return min(self.max_extra, self.chunk_steps // 2)  # a probe, to measure one update's cost
         spare = self.shown_s - self.base_s
         return max(0, min(self.max_extra, int(self.spare_fraction * spare / self.update_s)))
+
+    def settle(self, cap: int, taught: int) -> int:
+        """The chunk's extra updates once its drain is known: `cap` by the clock, or with `updates_per_event` what
+        the `taught` events (and the backlog) have bought, within `cap`."""
+        if self.per_event <= 0:
+            return cap
+        self.owed += self.per_event * taught
+        n = min(cap, int(self.owed))
+        self.owed -= n
+        return n
 
     def observe(self, base_s: float, extra: int, extra_s: float) -> None:
         """A chunk's measured cost: without its extra updates, and of its `extra` updates."""

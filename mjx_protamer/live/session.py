@@ -133,7 +133,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         sinks.append(SnapshotSink(spec.out, round(spec.snapshot_every_s / learner.dt)))
     sc = spec.config.session
     pacer = UpdatePacer(learner.chunk_steps, learner.dt, sc.updates_per_step, sc.max_updates_per_step,
-                        sc.spare_fraction, sc.unpaced_updates_per_step, paced=spec.pace and spec.live)
+                        sc.spare_fraction, sc.unpaced_updates_per_step, paced=spec.pace and spec.live,
+                        updates_per_event=sc.updates_per_event if learner.kind == "ddpg" else 0.0)
     if learner.kind == "ddpg" and spec.feedback != "none":
         d = learner.config.ddpg
         print(f"[finetune] DDPG trains on {d.reward_alpha:g} r_env + {d.reward_beta:g} r_hat"

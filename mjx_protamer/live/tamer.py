@@ -52,7 +52,12 @@ class TamerLearner(ChunkLearner):
         self.use_model = use_model
         self.model = SessionRewardModel(fc.reward_model, fc.credit, env.observation_size, env.action_size, fc.seed,
                                         tc.chunk_steps, session.max_events_per_chunk, session.rows_per_event)
-        self.trainer = make_train(pretrain, env, human_reward_fn=self.model.apply if use_model else None,
+        # on the person's clock (`session.updates_per_event`) the chunks make no updates of their own: every update
+        # is an extra one that an event bought (live/pace.py)
+        self.chunk_updates = 0 if session.updates_per_event > 0 else tc.updates_per_step
+        learn = pretrain if self.chunk_updates == tc.updates_per_step else dataclasses.replace(
+            pretrain, train=dataclasses.replace(tc, updates_per_step=self.chunk_updates))
+        self.trainer = make_train(learn, env, human_reward_fn=self.model.apply if use_model else None,
                                   devices=jax.devices()[:1])
         self.state = self.trainer.init(jax.random.PRNGKey(tc.seed))
         self.history = StepHistory(history, env.observation_size, env.action_size)
@@ -120,7 +125,7 @@ class TamerLearner(ChunkLearner):
         self.state, metrics, steps, extras = self.trainer.collect_chunk(self.state, self._human_params())
         obs, action, terms, regions, metrics = jax.device_get(
             (steps.obs[:, 0], steps.action[:, 0], steps.reward_terms[:, 0], extras.get("region_mask"), metrics))
-        self.updates += self.chunk_steps * self.config.train.updates_per_step
+        self.updates += self.chunk_steps * self.chunk_updates
         t0, times = self._stamp(t0)
         self.history.record(self.first_step, obs, action)
         return self._finish_chunk(Chunk(self.first_step, t0, times, obs, action, terms,

@@ -33,3 +33,20 @@ def test_an_unpaced_session_gets_its_fixed_ratio_and_counts_updates_per_shown_st
     p.observe(base_s=0.1, extra=50, extra_s=0.1)
     p.observe(base_s=0.1, extra=50, extra_s=0.1)
     assert p.updates_per_step() == 2.0
+
+
+def test_on_the_persons_clock_events_buy_the_updates_within_the_cap_and_a_backlog_carries_over():
+    """`session.updates_per_event`: the chunks make none of their own; each event the learner took buys N."""
+    p = UpdatePacer(chunk_steps=50, dt=0.005, updates_per_step=1, max_updates_per_step=3.0, spare_fraction=0.8,
+                    unpaced_updates_per_step=2.0, paced=False, updates_per_event=60)
+    cap = p.next()
+    assert cap == 150  # 3 per shown step, none of them the chunk's own
+    assert p.settle(cap, 0) == 0  # nobody spoke: no learning
+    assert p.settle(cap, 1) == 60
+    assert p.settle(cap, 4) == 150 and p.owed == 90
+    assert p.settle(cap, 0) == 90 and p.owed == 0
+    p.observe(base_s=0.1, extra=60, extra_s=0.1)
+    p.observe(base_s=0.1, extra=0, extra_s=0.0)
+    assert p.updates_per_step() == 0.6  # 60 updates over 100 shown steps
+    clocked = _pacer(paced=False)
+    assert clocked.settle(clocked.next(), 5) == 50  # by the clock, events change nothing

@@ -9,6 +9,7 @@ The end-to-end test (slow): against DDPG alone with the same seeds, the determin
 action on test episodes must rise by at least 0.15.
 """
 
+import jax
 import numpy as np
 import pytest
 
@@ -124,8 +125,6 @@ def test_deep_coach_is_configured_from_the_coach_section_and_the_command_line(tm
 
 @pytest.mark.slow
 def test_tamer_with_simulated_keyboard_teacher_moves_behaviour_its_way():
-    import jax
-
     from mjx_protamer.agents.ddpg.evaluate import make_rollout
 
     overrides = RULE + ["pretrain.ddpg.actor_hidden=[64,64]", "pretrain.ddpg.critic_hidden=[64,64]",
@@ -179,3 +178,18 @@ def test_the_anchor_lets_go_as_the_person_teaches_and_holds_a_session_nobody_spe
     for _ in range(2):
         run_chunk(silent, silent_clock, extra=5)
     assert float(silent.state.anchor_weight) == 1.0
+
+
+def test_on_the_persons_clock_a_chunk_makes_no_updates_of_its_own():
+    """`session.updates_per_event`: the chunk steps the env and fills the replay but does not learn; the updates the
+    person's events buy come after the drain (live/pace.py settles how many)."""
+    learner, _, _, clock = toy_learner(RULE + ["session.updates_per_event=20"], warmup_env_steps=0)
+    before = jax.tree.map(np.array, learner.state.actor_params)
+    run_chunk(learner, clock)
+    run_chunk(learner, clock)
+    assert learner.updates == 0
+    jax.tree.map(np.testing.assert_array_equal, jax.tree.map(np.array, learner.state.actor_params), before)
+    run_chunk(learner, clock, extra=20)
+    assert learner.updates == 20
+    changed = jax.tree.map(lambda a, b: not np.array_equal(np.array(a), b), learner.state.actor_params, before)
+    assert any(jax.tree.leaves(changed))
