@@ -24,8 +24,9 @@ from mjx_protamer.human.reward_model import RewardModelConfig
 from mjx_protamer.human.teachers import TeacherConfig
 
 # Of a feedback config's pretrain section a live session takes only what DDPG learns from and how fast: the
-# reward weights, action biasing (its own step size, the critic of r_hat alone), the anchor and the step sizes. The rest (networks, env,
-# noise) is the checkpoint's. (Sessions recorded before 6 December took the two reward weights alone.)
+# reward weights, action biasing (its own step size, the critic of r_hat alone), the anchor and the step sizes.
+# The rest (networks, env, noise) is the checkpoint's. (Sessions recorded before 6 December took the two reward
+# weights alone.)
 SESSION_DDPG_KEYS = ("reward_alpha", "reward_beta", "human_actor_coef", "human_actor_lr", "human_critic_coef",
                      "human_critic_gamma", "anchor_coef", "anchor_release_events", "anchor_praise_release",
                      "actor_lr", "critic_lr")

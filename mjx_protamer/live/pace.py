@@ -19,7 +19,9 @@ class UpdatePacer:
     def __init__(self, chunk_steps: int, dt: float, updates_per_step: int, max_updates_per_step: float,
                  spare_fraction: float, unpaced_updates_per_step: float, paced: bool, updates_per_event: float = 0.0):
         self.per_event = updates_per_event
-        self.owed = 0.0  # updates the person's events have bought and the pace has not yet allowed
+        # updates the person's events have bought and the pace has not yet allowed (host state: a resumed session
+        # starts without a backlog; a replay makes the recorded counts)
+        self.owed = 0.0
         if updates_per_event > 0:  # the chunks make none of their own (live/tamer.py)
             updates_per_step = 0
         self.shown_s = chunk_steps * dt
