@@ -111,6 +111,11 @@ class SessionConfig:
     max_events_per_chunk: int = 16  # feedback events credited per chunk (more are logged and dropped)
     rows_per_event: int = 32  # credited steps drawn per event in proportion to their credit weight (batched: same)
 
+    @property
+    def chunk_updates_per_step(self) -> int:
+        """The DDPG updates a chunk makes per step of its own: none on the person's clock (`updates_per_event`)."""
+        return 0 if self.updates_per_event > 0 else self.updates_per_step
+
     def validate(self) -> None:
         check(self.updates_per_step >= 1, "updates_per_step", f"must be >= 1, got {self.updates_per_step}")
         check(self.max_updates_per_step >= self.updates_per_step, "max_updates_per_step",

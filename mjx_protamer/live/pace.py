@@ -22,8 +22,6 @@ class UpdatePacer:
         # updates the person's events have bought and the pace has not yet allowed (host state: a resumed session
         # starts without a backlog; a replay makes the recorded counts)
         self.owed = 0.0
-        if updates_per_event > 0:  # the chunks make none of their own (live/tamer.py)
-            updates_per_step = 0
         self.shown_s = chunk_steps * dt
         self.max_extra = max(0, int(math.floor((max_updates_per_step - updates_per_step) * chunk_steps)))
         self.unpaced_extra = max(0, int(round((unpaced_updates_per_step - updates_per_step) * chunk_steps)))

@@ -132,7 +132,7 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
     if spec.snapshot_every_s > 0:
         sinks.append(SnapshotSink(spec.out, round(spec.snapshot_every_s / learner.dt)))
     sc = spec.config.session
-    pacer = UpdatePacer(learner.chunk_steps, learner.dt, sc.updates_per_step, sc.max_updates_per_step,
+    pacer = UpdatePacer(learner.chunk_steps, learner.dt, sc.chunk_updates_per_step, sc.max_updates_per_step,
                         sc.spare_fraction, sc.unpaced_updates_per_step, paced=spec.pace and spec.live,
                         updates_per_event=sc.updates_per_event if learner.kind == "ddpg" else 0.0)
     if learner.kind == "ddpg" and spec.feedback != "none":

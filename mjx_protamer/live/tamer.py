@@ -54,7 +54,7 @@ class TamerLearner(ChunkLearner):
                                         tc.chunk_steps, session.max_events_per_chunk, session.rows_per_event)
         # on the person's clock (`session.updates_per_event`) the chunks make no updates of their own: every update
         # is an extra one that an event bought (live/pace.py)
-        self.chunk_updates = 0 if session.updates_per_event > 0 else tc.updates_per_step
+        self.chunk_updates = session.chunk_updates_per_step
         learn = pretrain if self.chunk_updates == tc.updates_per_step else dataclasses.replace(
             pretrain, train=dataclasses.replace(tc, updates_per_step=self.chunk_updates))
         self.trainer = make_train(learn, env, human_reward_fn=self.model.apply if use_model else None,

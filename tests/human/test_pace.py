@@ -37,8 +37,12 @@ def test_an_unpaced_session_gets_its_fixed_ratio_and_counts_updates_per_shown_st
 
 def test_on_the_persons_clock_events_buy_the_updates_within_the_cap_and_a_backlog_carries_over():
     """`session.updates_per_event`: the chunks make none of their own; each event the learner took buys N."""
-    p = UpdatePacer(chunk_steps=50, dt=0.005, updates_per_step=1, max_updates_per_step=3.0, spare_fraction=0.8,
-                    unpaced_updates_per_step=2.0, paced=False, updates_per_event=60)
+    from mjx_protamer.human.feedback_config import SessionConfig
+
+    session = SessionConfig(updates_per_step=1, updates_per_event=60)
+    assert session.chunk_updates_per_step == 0 and SessionConfig().chunk_updates_per_step == 1
+    p = UpdatePacer(chunk_steps=50, dt=0.005, updates_per_step=session.chunk_updates_per_step, max_updates_per_step=3.0,
+                    spare_fraction=0.8, unpaced_updates_per_step=2.0, paced=False, updates_per_event=60)
     cap = p.next()
     assert cap == 150  # 3 per shown step, none of them the chunk's own
     assert p.settle(cap, 0) == 0  # nobody spoke: no learning
