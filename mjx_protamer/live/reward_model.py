@@ -109,6 +109,18 @@ class SessionRewardModel:
                                         jnp.asarray(action, jnp.float32)))
 
 
+def praised_rows(inputs, key, n: int):
+    """`n` rows (obs, action, weight) of what the person praised, for DDPG's `praise_imitation_coef`: drawn from the
+    session's feedback ring `inputs[1]` in proportion to weight x value among its rows of positive value (a
+    stronger praise is imitated more; silences and reproach never), each weighing 1; all weigh 0 until a praise."""
+    ring = inputs[1]
+    cap = ring.weight.shape[0]
+    mass = jnp.where((jnp.arange(cap) < ring.size) & (ring.target > 0), ring.weight * ring.target, 0.0)
+    cdf = jnp.cumsum(mass)
+    idx = jnp.clip(jnp.searchsorted(cdf, jax.random.uniform(key, (n,)) * cdf[-1], side="right"), 0, cap - 1)
+    return ring.obs[idx], ring.action[idx], jnp.full((n,), jnp.where(cdf[-1] > 0, 1.0, 0.0))
+
+
 def _absorb(fit, apply, optimizer, config: RewardModelConfig, temperature: float, n_fresh_max: int, n_replay: int,
             state: RewardModelState, ev_obs, ev_act, ev_w, ev_h, n_events, s_obs, s_act, s_w):
     E, K = ev_w.shape

@@ -96,6 +96,12 @@ class DDPGConfig:
     # event alike; 0 only reproach lets the anchor go. Praise says "keep doing this": an infant the person is
     # pleased with then keeps what it does instead of drifting with the intrinsic reward once released.
     anchor_praise_release: float = 1.0
+    # Praise as a demonstration (0: off): the actor is also pulled toward the actions the person praised, weighing
+    # `praise_imitation_coef * |mu(s) - a|^2` over (s, a) rows the session's feedback ring credited to praise
+    # (drawn in proportion to weight x value). Action biasing follows r_hat's gradient wherever it points; this
+    # says "keep doing what you did when I said good", which 60 words of a voice can say (docs/human_feedback.md).
+    # Needs the session's ring (live/tamer.py); unused elsewhere.
+    praise_imitation_coef: float = 0.0
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -126,6 +132,8 @@ class DDPGConfig:
         check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
         check(0.0 <= self.anchor_praise_release <= 1.0, "anchor_praise_release",
               f"must be in [0, 1] (1: a praise lets go as much as a reproach), got {self.anchor_praise_release}")
+        check(self.praise_imitation_coef >= 0.0, "praise_imitation_coef",
+              f"must be >= 0 (0: praise is not imitated), got {self.praise_imitation_coef}")
         check(self.anchor_release_events >= 0, "anchor_release_events",
               f"must be >= 0 (0: the anchor never lets go), got {self.anchor_release_events}")
         check(self.replay_size >= self.batch_size, "replay_size",

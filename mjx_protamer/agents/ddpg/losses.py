@@ -55,7 +55,8 @@ def td_target(reward, next_q, terminal, gamma: float) -> jax.Array:
 
 
 def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.Array, preact_coef: float = 0.0,
-               preact_free: float = 0.0, human: tuple | None = None, anchor: tuple | None = None):
+               preact_free: float = 0.0, human: tuple | None = None, anchor: tuple | None = None,
+               imitate: tuple | None = None):
     """Deterministic policy gradient: maximise Q(s, mu(s)), less `preact_coef * mean(max(|pre| - free, 0)^2)`
     over the pre-tanh activations.
 
@@ -68,6 +69,8 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
     policy only after the critic has bootstrapped it into Q, which a few minutes of feedback do not allow.
     `anchor` = (anchor_params, coef): `coef * mean |mu(s) - mu_anchor(s)|^2`, a pull toward the actor a session
     started from: what the intrinsic reward alone would change drifts no further than the pull allows.
+    `imitate` = (obs, action, weight, coef): `coef * sum w |mu(s) - a|^2 / sum w` over rows the person praised
+    (`ddpg.praise_imitation_coef`; no rows, weight 0: no pull).
     """
     pre = actor_apply(actor_params, obs, True)
     action = jnp.tanh(pre)
@@ -79,7 +82,15 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
         params, coef = anchor
         ref = jax.lax.stop_gradient(actor_apply(params, obs))
         loss = loss + coef * jnp.mean(jnp.sum((action - ref) ** 2, axis=-1))
+    if imitate is not None:
+        loss = loss + imitation_loss(actor_params, actor_apply, *imitate)
     return loss
+
+
+def imitation_loss(actor_params, actor_apply, obs, action, weight, coef: float) -> jax.Array:
+    """`coef * sum_i w_i |mu(s_i) - a_i|^2 / sum_i w_i`: the actor pulled toward demonstrated actions."""
+    d2 = jnp.sum((actor_apply(actor_params, obs) - action) ** 2, axis=-1)
+    return coef * jnp.sum(weight * d2) / jnp.maximum(jnp.sum(weight), 1e-6)
 
 
 def human_bias_loss(action, obs, human: HumanTerm) -> jax.Array:
