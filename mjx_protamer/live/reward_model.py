@@ -109,13 +109,14 @@ class SessionRewardModel:
                                         jnp.asarray(action, jnp.float32)))
 
 
-def praised_rows(inputs, key, n: int):
-    """`n` rows (obs, action, weight) of what the person praised, for DDPG's `praise_imitation_coef`: drawn from the
-    session's feedback ring `inputs[1]` in proportion to weight x value among its rows of positive value (a
-    stronger praise is imitated more; silences and reproach never), each weighing 1; all weigh 0 until a praise."""
+def feedback_rows(inputs, key, n: int, sign: float):
+    """`n` rows (obs, action, weight) of what the person praised (`sign` +1) or reproached (-1), for DDPG's
+    `praise_imitation_coef` and `reproach_avoid_coef`: drawn from the session's feedback ring `inputs[1]` in
+    proportion to weight x |value| among its rows of that sign (a stronger word counts more; never a silence),
+    each weighing 1; all weigh 0 until the person has said something of that sign."""
     ring = inputs[1]
     cap = ring.weight.shape[0]
-    mass = jnp.where((jnp.arange(cap) < ring.size) & (ring.target > 0), ring.weight * ring.target, 0.0)
+    mass = jnp.where((jnp.arange(cap) < ring.size) & (sign * ring.target > 0), ring.weight * sign * ring.target, 0.0)
     cdf = jnp.cumsum(mass)
     idx = jnp.clip(jnp.searchsorted(cdf, jax.random.uniform(key, (n,)) * cdf[-1], side="right"), 0, cap - 1)
     return ring.obs[idx], ring.action[idx], jnp.full((n,), jnp.where(cdf[-1] > 0, 1.0, 0.0))

@@ -143,6 +143,7 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
               + (f", climbing {d.human_critic_coef:g} x a critic of r_hat alone (gamma {d.human_critic_gamma:g})"
                  if d.human_critic_coef else "")
               + (f", imitating praised actions {d.praise_imitation_coef:g}" if d.praise_imitation_coef else "")
+              + (f", avoiding reproached ones {d.reproach_avoid_coef:g}" if d.reproach_avoid_coef else "")
               + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
               + (f" until {d.anchor_release_events} events have taught it" if d.anchor_coef
                  and d.anchor_release_events else "")

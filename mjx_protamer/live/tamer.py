@@ -29,7 +29,7 @@ from mjx_protamer.human.credit import CreditAssigner, StepHistory, silence_reach
 from mjx_protamer.human.events import FeedbackEvent
 from mjx_protamer.human.feedback_config import FeedbackConfig, SessionConfig
 from mjx_protamer.live.learner import Chunk, ChunkLearner
-from mjx_protamer.live.reward_model import SessionRewardModel, praised_rows
+from mjx_protamer.live.reward_model import SessionRewardModel, feedback_rows
 
 REWARD_MODEL_DIR = "reward_model"  # beside checkpoints/: the reward model's state (orbax, checksummed)
 
@@ -57,13 +57,14 @@ class TamerLearner(ChunkLearner):
         self.chunk_updates = session.chunk_updates_per_step
         learn = pretrain if self.chunk_updates == tc.updates_per_step else dataclasses.replace(
             pretrain, train=dataclasses.replace(tc, updates_per_step=self.chunk_updates))
-        # praise imitated (`ddpg.praise_imitation_coef`): DDPG also reads the reward model's feedback ring, so the
-        # person's inputs to it are (r_hat's params, the ring)
-        self.imitate = use_model and pretrain.ddpg.praise_imitation_coef > 0
+        # praise imitated, reproach avoided (`ddpg.praise_imitation_coef`, `reproach_avoid_coef`): DDPG also reads the
+        # reward model's feedback ring, so the person's inputs to it are (r_hat's params, the ring)
+        d = pretrain.ddpg
+        self.imitate = use_model and (d.praise_imitation_coef > 0 or d.reproach_avoid_coef > 0)
         apply = self.model.apply
         reward_fn = (lambda inputs, obs, action: apply(inputs[0], obs, action)) if self.imitate else apply
         self.trainer = make_train(learn, env, human_reward_fn=reward_fn if use_model else None,
-                                  devices=jax.devices()[:1], praised_rows_fn=praised_rows if self.imitate else None)
+                                  devices=jax.devices()[:1], feedback_rows_fn=feedback_rows if self.imitate else None)
         self.state = self.trainer.init(jax.random.PRNGKey(tc.seed))
         self.history = StepHistory(history, env.observation_size, env.action_size)
         self.assigner = CreditAssigner(fc.credit, self.step_clock, fc.teacher.channel)

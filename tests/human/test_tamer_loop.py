@@ -195,40 +195,46 @@ def test_on_the_persons_clock_a_chunk_makes_no_updates_of_its_own():
     assert any(jax.tree.leaves(changed))
 
 
-def test_praise_imitation_pulls_the_actor_toward_the_actions_the_person_praised():
-    """`ddpg.praise_imitation_coef`: DDPG draws rows of the feedback ring the person praised (in proportion to
-    weight x value; never a silence or a reproach) and pulls the actor toward their actions. The person's other
+def test_praise_imitation_and_reproach_avoidance_move_the_actor_as_the_person_said():
+    """`ddpg.praise_imitation_coef` and `reproach_avoid_coef`: DDPG draws rows of the feedback ring the person
+    praised (or reproached; in proportion to weight x |value|, never a silence) and pulls the actor toward their
+    actions (or pushes it away). The person's other
     routes to the policy are off here (no action biasing, r_hat out of the critic), so what moves the actor up is
     the imitation: the teacher praises up (action[1] > 0.2) and reproaches down."""
     from mjx_protamer.human.batched import ring_add, ring_init
-    from mjx_protamer.live.reward_model import praised_rows
+    from mjx_protamer.live.reward_model import feedback_rows
 
     ring = ring_init(8, 1, 1)
-    _, _, w = praised_rows((None, ring), jax.random.PRNGKey(0), 16)
+    _, _, w = feedback_rows((None, ring), jax.random.PRNGKey(0), 16, 1.0)
     assert float(w.sum()) == 0.0  # nothing praised yet: no pull
     rows = np.arange(6, dtype=np.float32)[:, None]
     ring = ring_add(ring, rows, rows, np.array([1, 1, 1, 1, 0.03, 1], np.float32),
                     np.array([-1, 1, 0.5, -1, 0, 0], np.float32))
-    obs, action, w = praised_rows((None, ring), jax.random.PRNGKey(1), 3000)
+    obs, action, w = feedback_rows((None, ring), jax.random.PRNGKey(1), 3000, 1.0)
     picked = np.asarray(obs)[:, 0]
     assert set(np.unique(picked)) == {1.0, 2.0} and np.all(np.asarray(action)[:, 0] == picked)
     assert float(np.mean(picked == 1.0)) == pytest.approx(2 / 3, abs=0.03) and np.all(np.asarray(w) == 1.0)
+    obs, _, w = feedback_rows((None, ring), jax.random.PRNGKey(2), 3000, -1.0)  # reproach: rows 0 and 3 alike
+    picked = np.asarray(obs)[:, 0]
+    assert set(np.unique(picked)) == {0.0, 3.0} and float(np.mean(picked == 0.0)) == pytest.approx(0.5, abs=0.03)
 
     # the teacher praises down (action[1] < -0.2), where this env's own reward does not lead
     down = RULE[:3] + ["feedback.teacher.rule=[{signal: 'action:1', value: -1.0, above: 0.2}, "
                        "{signal: 'action:1', value: 1.0, below: -0.2}]",
                        "pretrain.ddpg.human_actor_coef=0", "pretrain.ddpg.reward_beta=0"]
     vertical = {}
-    for coef in (0, 50):
-        learner, cfg, env, clock = toy_learner(down + [f"pretrain.ddpg.praise_imitation_coef={coef}"],
-                                               warmup_env_steps=100)
+    for name, knob in (("none", []), ("imitate", ["pretrain.ddpg.praise_imitation_coef=50"]),
+                       ("avoid", ["pretrain.ddpg.reproach_avoid_coef=50"])):
+        learner, cfg, env, clock = toy_learner(down + knob, warmup_env_steps=100)
         teacher = teacher_for(learner, cfg, env, clock)
         for _ in range(2):
             run_chunk(learner, clock, [teacher])
         learner.extra_updates(300)
         ring = learner.model.state.ring
         target, obs = np.asarray(ring.target[:int(ring.size)]), np.asarray(ring.obs[:int(ring.size)])
-        assert (target > 0).sum() > 100
-        vertical[coef] = float(np.mean(np.asarray(learner.trainer.act(learner.state.actor_params, obs))[:, 1]))
-    # the env's reward alone takes the actor up; imitating the praise keeps it down with the praised actions
-    assert vertical[50] < -0.1 and vertical[0] > vertical[50] + 0.5, vertical
+        assert (target > 0).sum() > 100 and (target < 0).sum() > 100
+        vertical[name] = float(np.mean(np.asarray(learner.trainer.act(learner.state.actor_params, obs))[:, 1]))
+    # the env's reward alone takes the actor up; imitating the praise keeps it down with the praised actions, and
+    # pushing away from the reproached (up) actions holds it back
+    assert vertical["imitate"] < -0.1 and vertical["none"] > vertical["imitate"] + 0.5, vertical
+    assert vertical["none"] > vertical["avoid"] + 0.3, vertical

@@ -102,6 +102,10 @@ class DDPGConfig:
     # says "keep doing what you did when I said good", which 60 words of a voice can say (docs/human_feedback.md).
     # Needs the session's ring (live/tamer.py); unused elsewhere.
     praise_imitation_coef: float = 0.0
+    # Reproach as a counter-demonstration (0: off): `reproach_avoid_coef * max(0, 1 - |mu(s) - a|^2)` over the rows
+    # the person reproached, a push away from what was done there until the action differs by 1 (squared, over
+    # the action's dimensions; exploration noise of 0.2 per dimension makes ~0.6). Needs the ring, as above.
+    reproach_avoid_coef: float = 0.0
     noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def validate(self) -> None:
@@ -134,6 +138,8 @@ class DDPGConfig:
               f"must be in [0, 1] (1: a praise lets go as much as a reproach), got {self.anchor_praise_release}")
         check(self.praise_imitation_coef >= 0.0, "praise_imitation_coef",
               f"must be >= 0 (0: praise is not imitated), got {self.praise_imitation_coef}")
+        check(self.reproach_avoid_coef >= 0.0, "reproach_avoid_coef",
+              f"must be >= 0 (0: reproach does not push away), got {self.reproach_avoid_coef}")
         check(self.anchor_release_events >= 0, "anchor_release_events",
               f"must be >= 0 (0: the anchor never lets go), got {self.anchor_release_events}")
         check(self.replay_size >= self.batch_size, "replay_size",

@@ -56,7 +56,7 @@ def td_target(reward, next_q, terminal, gamma: float) -> jax.Array:
 
 def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.Array, preact_coef: float = 0.0,
                preact_free: float = 0.0, human: tuple | None = None, anchor: tuple | None = None,
-               imitate: tuple | None = None):
+               imitate: tuple | None = None, avoid: tuple | None = None):
     """Deterministic policy gradient: maximise Q(s, mu(s)), less `preact_coef * mean(max(|pre| - free, 0)^2)`
     over the pre-tanh activations.
 
@@ -70,7 +70,8 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
     `anchor` = (anchor_params, coef): `coef * mean |mu(s) - mu_anchor(s)|^2`, a pull toward the actor a session
     started from: what the intrinsic reward alone would change drifts no further than the pull allows.
     `imitate` = (obs, action, weight, coef): `coef * sum w |mu(s) - a|^2 / sum w` over rows the person praised
-    (`ddpg.praise_imitation_coef`; no rows, weight 0: no pull).
+    (`ddpg.praise_imitation_coef`; no rows, weight 0: no pull). `avoid` = (obs, action, weight, coef):
+    `coef * sum w max(0, 1 - |mu(s) - a|^2) / sum w` over rows the person reproached (`ddpg.reproach_avoid_coef`).
     """
     pre = actor_apply(actor_params, obs, True)
     action = jnp.tanh(pre)
@@ -84,6 +85,8 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
         loss = loss + coef * jnp.mean(jnp.sum((action - ref) ** 2, axis=-1))
     if imitate is not None:
         loss = loss + imitation_loss(actor_params, actor_apply, *imitate)
+    if avoid is not None:
+        loss = loss + avoidance_loss(actor_params, actor_apply, *avoid)
     return loss
 
 
@@ -91,6 +94,13 @@ def imitation_loss(actor_params, actor_apply, obs, action, weight, coef: float) 
     """`coef * sum_i w_i |mu(s_i) - a_i|^2 / sum_i w_i`: the actor pulled toward demonstrated actions."""
     d2 = jnp.sum((actor_apply(actor_params, obs) - action) ** 2, axis=-1)
     return coef * jnp.sum(weight * d2) / jnp.maximum(jnp.sum(weight), 1e-6)
+
+
+def avoidance_loss(actor_params, actor_apply, obs, action, weight, coef: float) -> jax.Array:
+    """`coef * sum_i w_i max(0, 1 - |mu(s_i) - a_i|^2) / sum_i w_i`: the actor pushed away from what was
+    reproached, until its action differs by 1 (a hinge: a push that stops, not a flight to the action box's edge)."""
+    d2 = jnp.sum((actor_apply(actor_params, obs) - action) ** 2, axis=-1)
+    return coef * jnp.sum(weight * jnp.maximum(0.0, 1.0 - d2)) / jnp.maximum(jnp.sum(weight), 1e-6)
 
 
 def human_bias_loss(action, obs, human: HumanTerm) -> jax.Array:

@@ -167,13 +167,14 @@ def resolve_devices(num_devices: int) -> list:
 
 
 def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, devices: list | None = None,
-               praised_rows_fn: Callable | None = None) -> Trainer:
+               feedback_rows_fn: Callable | None = None) -> Trainer:
     """Build DDPG for `env` (one world, the env contract) from a config with `.ddpg` and `.train` sections.
 
     `human_reward_fn(human_params, obs, action) -> (B,)` adds `beta * r_hat` to the reward at sample time;
     its parameters are passed to `train_chunk` on every call (None when there is no model).
-    `praised_rows_fn(human_params, key, n) -> (obs, action, weight)`: n rows of what the person praised, for
-    `ddpg.praise_imitation_coef` (a live session's feedback ring: live/reward_model.py; None: no imitation).
+    `feedback_rows_fn(human_params, key, n, sign) -> (obs, action, weight)`: n rows of what the person praised
+    (sign +1) or reproached (-1), for `ddpg.praise_imitation_coef` and `reproach_avoid_coef` (a live session's
+    feedback ring: live/reward_model.py; None: neither).
     """
     dc, tc = config.ddpg, config.train
     devices = resolve_devices(tc.num_devices) if devices is None else devices
@@ -203,7 +204,9 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
     human_opt = optax.adam(dc.human_actor_lr) if dc.human_actor_coef > 0 and dc.human_actor_lr > 0 else None
     has_human_critic = dc.human_critic_coef > 0  # its state (from the config alone)
     human_critic_coef = dc.human_critic_coef * (1.0 - dc.human_critic_gamma) if human_reward_fn is not None else 0.0
-    imitation_coef = dc.praise_imitation_coef if praised_rows_fn is not None and human_reward_fn is not None else 0.0
+    has_rows = feedback_rows_fn is not None and human_reward_fn is not None
+    imitation_coef = dc.praise_imitation_coef if has_rows else 0.0
+    avoid_coef = dc.reproach_avoid_coef if has_rows else 0.0
     warmup_iterations = tc.warmup_iterations
     # The region mask rides beside the transitions for teacher rules, never into the replay (it would grow
     # every row for a signal the learner never reads).
@@ -289,13 +292,16 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
                                     human_critic_coef)
         if anchor is not None:  # (params, weight) of the state -> (params, coef) of the loss
             anchor = (anchor[0], dc.anchor_coef * anchor[1])
-        imitate = None
-        if imitation_coef > 0:  # its own stream, so the minibatch's draws are those of a run without it
-            imitate = (*praised_rows_fn(human_params, jax.random.fold_in(key, 0x1417), local_batch), imitation_coef)
+        imitate = avoid = None  # the rows on their own streams: the minibatch's draws are those of a run without
+        if imitation_coef > 0:
+            imitate = (*feedback_rows_fn(human_params, jax.random.fold_in(key, 0x1417), local_batch, 1.0),
+                       imitation_coef)
+        if avoid_coef > 0:
+            avoid = (*feedback_rows_fn(human_params, jax.random.fold_in(key, 0x1418), local_batch, -1.0), avoid_coef)
         own = human_opt is not None and bias is not None
         a_loss, a_grads = jax.value_and_grad(losses.actor_loss)(
             lr.actor_params, actor.apply, critic_params, critic.apply, batch.obs, dc.actor_preact_coef,
-            dc.actor_preact_free, None if own else bias, anchor, imitate)
+            dc.actor_preact_free, None if own else bias, anchor, imitate, avoid)
         a_updates, actor_opt_state = actor_opt.update(pmean(a_grads), lr.actor_opt_state, lr.actor_params)
         human_opt_state = lr.human_opt_state
         if own:
