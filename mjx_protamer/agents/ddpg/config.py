@@ -99,8 +99,8 @@ class DDPGConfig:
     # Praise as a demonstration (0: off): the actor is also pulled toward the actions the person praised, weighing
     # `praise_imitation_coef * |mu(s) - a|^2` over (s, a) rows the session's feedback ring credited to praise
     # (drawn in proportion to weight x value). Action biasing follows r_hat's gradient wherever it points; this
-    # says "keep doing what you did when I said good", which 60 words of a voice can say (docs/human_feedback.md).
-    # Needs the session's ring (live/tamer.py); unused elsewhere.
+    # says "keep doing what you did when I said good". Needs a live session's ring (live/tamer.py; table2 refuses
+    # it). Measured at a voice's rate and not shipped (docs/human_feedback.md, "A word as a demonstration").
     praise_imitation_coef: float = 0.0
     # Reproach as a counter-demonstration (0: off): `reproach_avoid_coef * max(0, 1 - |mu(s) - a|^2)` over the rows
     # the person reproached, a push away from what was done there until the action differs by 1 (squared, over

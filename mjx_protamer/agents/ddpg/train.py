@@ -292,7 +292,7 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
                                     human_critic_coef)
         if anchor is not None:  # (params, weight) of the state -> (params, coef) of the loss
             anchor = (anchor[0], dc.anchor_coef * anchor[1])
-        imitate = avoid = None  # the rows on their own streams: the minibatch's draws are those of a run without
+        imitate = avoid = None  # own streams: the minibatches stay those of a run without them
         if imitation_coef > 0:
             imitate = (*feedback_rows_fn(human_params, jax.random.fold_in(key, 0x1417), local_batch, 1.0),
                        imitation_coef)
