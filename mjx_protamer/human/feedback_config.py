@@ -109,6 +109,9 @@ class SessionConfig:
     updates_per_event: float = 0.0
     # the pretraining run's latest transitions a session's DDPG replay starts with (0: an empty replay)
     replay_from_checkpoint: int = 20_000
+    # False: the infant acts with its deterministic actor, no exploration noise (the checkpoint's noise otherwise).
+    # The person then judges the policy a test measures and the session hands over, not the jitter around it
+    explore: bool = True
     max_events_per_chunk: int = 16  # feedback events credited per chunk (more are logged and dropped)
     rows_per_event: int = 32  # credited steps drawn per event in proportion to their credit weight (batched: same)
 

@@ -247,10 +247,12 @@ def _credit_text(credit) -> str:
 
 def session_pretrain(pre, chunk_steps: int, session: SessionConfig, ddpg_overrides: dict, replay_size: int):
     """The checkpoint's PretrainConfig as a session runs it: one env, the session's chunk and updates per step,
-    no warm-up, a constant step size (a session is open-ended), and the session's DDPG keys
-    (feedback_config.SESSION_DDPG_KEYS)."""
+    no warm-up, a constant step size (a session is open-ended), the session's DDPG keys
+    (feedback_config.SESSION_DDPG_KEYS), and no exploration noise with `session.explore` false."""
     train = dataclasses.replace(pre.train, num_envs=1, chunk_steps=chunk_steps, warmup_env_steps=0,
                                 total_env_steps=max(pre.train.total_env_steps, chunk_steps), num_devices=1,
                                 updates_per_step=session.updates_per_step)
     ddpg = dataclasses.replace(pre.ddpg, replay_size=replay_size, lr_final_fraction=1.0, **ddpg_overrides)
+    if not session.explore:  # the noise's random stream is drawn as before; its value is 0 (agents/ddpg/noise.py)
+        ddpg = dataclasses.replace(ddpg, noise=dataclasses.replace(ddpg.noise, kind="none"))
     return dataclasses.replace(pre, train=train, ddpg=ddpg)
