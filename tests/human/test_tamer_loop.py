@@ -238,3 +238,16 @@ def test_praise_imitation_and_reproach_avoidance_move_the_actor_as_the_person_sa
     # pushing away from the reproached (up) actions holds it back
     assert vertical["imitate"] < -0.1 and vertical["none"] > vertical["imitate"] + 0.5, vertical
     assert vertical["none"] > vertical["avoid"] + 0.3, vertical
+
+
+def test_without_exploration_the_person_watches_the_deterministic_actor():
+    """`session.explore` false: the infant on screen acts as the actor the session hands over (no noise added);
+    with the checkpoint's noise (the default) the first shown action differs from it."""
+    first = {}
+    for explore in (True, False):
+        learner, _, _, clock = toy_learner([f"session.explore={str(explore).lower()}",
+                                            "pretrain.ddpg.noise.sigma=0.3"])
+        params = jax.tree.map(np.array, learner.state.actor_params)  # the chunk's first step acts before any update
+        chunk, _ = run_chunk(learner, clock)
+        first[explore] = float(np.abs(chunk.action[0] - np.asarray(learner.trainer.act(params, chunk.obs[0]))).max())
+    assert first[False] == 0.0 and first[True] > 0.01, first
