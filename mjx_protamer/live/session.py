@@ -151,6 +151,10 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
                  and d.anchor_praise_release < 1 else "")
               + f"; feedback config {spec.config_path or 'the built-in defaults'}", flush=True)
 
+    if learner.kind == "ddpg" and not sc.explore:
+        print("[finetune] session.explore false: the infant acts with its deterministic actor (no exploration noise)",
+              flush=True)
+
     if getattr(learner, "attention", None) is not None:
         print("[finetune] credit.silence_needs_attention: a silent step teaches 'nothing to say' only while the "
               "live page is visible", flush=True)
