@@ -90,17 +90,21 @@ def actor_loss(actor_params, actor_apply, critic_params, critic_apply, obs: jax.
     return loss
 
 
+def _weighted_mean(actor_params, actor_apply, obs, action, weight, of_distance) -> jax.Array:
+    """`sum_i w_i f(|mu(s_i) - a_i|^2) / sum_i w_i` (0 where every weight is 0)."""
+    d2 = jnp.sum((actor_apply(actor_params, obs) - action) ** 2, axis=-1)
+    return jnp.sum(weight * of_distance(d2)) / jnp.maximum(jnp.sum(weight), 1e-6)
+
+
 def imitation_loss(actor_params, actor_apply, obs, action, weight, coef: float) -> jax.Array:
     """`coef * sum_i w_i |mu(s_i) - a_i|^2 / sum_i w_i`: the actor pulled toward demonstrated actions."""
-    d2 = jnp.sum((actor_apply(actor_params, obs) - action) ** 2, axis=-1)
-    return coef * jnp.sum(weight * d2) / jnp.maximum(jnp.sum(weight), 1e-6)
+    return coef * _weighted_mean(actor_params, actor_apply, obs, action, weight, lambda d2: d2)
 
 
 def avoidance_loss(actor_params, actor_apply, obs, action, weight, coef: float) -> jax.Array:
     """`coef * sum_i w_i max(0, 1 - |mu(s_i) - a_i|^2) / sum_i w_i`: the actor pushed away from what was
     reproached, until its action differs by 1 (a hinge: a push that stops, not a flight to the action box's edge)."""
-    d2 = jnp.sum((actor_apply(actor_params, obs) - action) ** 2, axis=-1)
-    return coef * jnp.sum(weight * jnp.maximum(0.0, 1.0 - d2)) / jnp.maximum(jnp.sum(weight), 1e-6)
+    return coef * _weighted_mean(actor_params, actor_apply, obs, action, weight, lambda d2: jnp.maximum(0.0, 1.0 - d2))
 
 
 def human_bias_loss(action, obs, human: HumanTerm) -> jax.Array:
