@@ -141,11 +141,13 @@ def test_table2_tour_right_is_the_tour_config_with_a_left_hand_reproach_only():
         tour.pretrain, tour.batched, tour.conditions, tour.seeds)
 
 
-@pytest.mark.parametrize("key", ["praise_imitation_coef", "reproach_avoid_coef"])
-def test_table2_refuses_a_live_sessions_option_it_cannot_run(key):
-    """A word as a demonstration reads a live session's feedback ring; the batched runs have none, so the key
-    would do nothing there: a one-line error naming it instead of a Table II that silently ignored it."""
+@pytest.mark.parametrize("key,value", [("praise_imitation_coef", "50"), ("reproach_avoid_coef", "50"),
+                                       ("anchor_praise_hold", "true")])
+def test_table2_refuses_a_live_sessions_option_it_cannot_run(key, value):
+    """A word as a demonstration reads a live session's feedback ring, and a praise re-anchors the actor on the
+    host; the batched runs have neither, so the key would do nothing there: a one-line error naming it instead of a
+    Table II that silently ignored it."""
     from mjx_protamer.config import ConfigError
 
     with pytest.raises(ConfigError, match=f"pretrain.ddpg.{key}.*live session"):
-        load_table2_config(None, [f"pretrain.ddpg.{key}=50"])
+        load_table2_config(None, ["pretrain.ddpg.anchor_coef=50", f"pretrain.ddpg.{key}={value}"])

@@ -174,6 +174,33 @@ def test_the_anchor_lets_go_as_the_person_teaches_and_holds_a_session_nobody_spe
         assert float(learner.state.anchor_weight) == pytest.approx(max(0.0, 1.0 - signs.count(False) / 40), abs=1e-6)
     assert signs.count(True) > 5 and signs.count(False) > 0, signs
 
+    # `ddpg.anchor_praise_hold`: a praise makes the actor of that moment the anchor at weight 1; a reproach lets
+    # 1/N go. The drain runs before the extra updates, so right after a drain with a praise, anchor == actor.
+    learner, cfg, env, clock = toy_learner(anchored + ["pretrain.ddpg.anchor_praise_hold=true"],
+                                           warmup_env_steps=100)
+    teacher = teacher_for(learner, cfg, env, clock)
+    checkpoint_actor = jax.tree.map(np.array, learner.state.anchor_params)
+    weight, held = 1.0, 0
+    for _ in range(3):
+        _, outcomes = run_chunk(learner, clock, [teacher])
+        values = [o.event.value for o in outcomes if o.why is None]
+        for v in values:
+            weight = 1.0 if v > 0 else max(0.0, weight - 1 / 40)
+        assert float(learner.state.anchor_weight) == pytest.approx(weight, abs=1e-6)
+        anchor, actor = (jax.tree.leaves(jax.tree.map(np.array, p)) for p in
+                         (learner.state.anchor_params, learner.state.actor_params))
+        if any(v > 0 for v in values):
+            held += 1
+            assert all(np.array_equal(a, b) for a, b in zip(anchor, actor))
+        learner.extra_updates(5)  # the actor moves on; the anchor stays where the praise put it
+        assert all(np.array_equal(a, b) for a, b in zip(anchor, jax.tree.leaves(
+            jax.tree.map(np.array, learner.state.anchor_params))))
+    assert held >= 2 and not all(np.array_equal(a, b) for a, b in zip(
+        jax.tree.leaves(checkpoint_actor), jax.tree.leaves(jax.tree.map(np.array, learner.state.anchor_params))))
+    assert learner.trainer.collect_chunk._cache_size() == 1 and learner.trainer.extra_updates._cache_size() == 1
+    with pytest.raises(ConfigError, match="anchor_praise_hold"):
+        toy_learner(RULE + ["pretrain.ddpg.anchor_praise_hold=true"], warmup_env_steps=100)
+
     silent, _, _, silent_clock = toy_learner(anchored, use_model=False, warmup_env_steps=100)
     for _ in range(2):
         run_chunk(silent, silent_clock, extra=5)

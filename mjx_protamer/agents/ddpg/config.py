@@ -96,6 +96,11 @@ class DDPGConfig:
     # event alike; 0 only reproach lets the anchor go. Praise says "keep doing this": an infant the person is
     # pleased with then keeps what it does instead of drifting with the intrinsic reward once released.
     anchor_praise_release: float = 1.0
+    # A praise holds what was praised (False: off): the anchor becomes the actor of the moment the praise is taken,
+    # at full weight; reproach lets it go as above. Praise says "keep doing this"; the checkpoint's actor is not what
+    # the person saw once the session has moved it. A session nobody speaks to keeps the checkpoint's anchor; one the
+    # person is pleased with keeps what pleased them; a reproached one learns until the next praise.
+    anchor_praise_hold: bool = False
     # Praise as a demonstration (0: off): the actor is also pulled toward the actions the person praised, weighing
     # `praise_imitation_coef * |mu(s) - a|^2` over (s, a) rows the session's feedback ring credited to praise
     # (drawn in proportion to weight x value). Action biasing follows r_hat's gradient wherever it points; this
@@ -136,6 +141,8 @@ class DDPGConfig:
         check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
         check(0.0 <= self.anchor_praise_release <= 1.0, "anchor_praise_release",
               f"must be in [0, 1] (1: a praise lets go as much as a reproach), got {self.anchor_praise_release}")
+        check(not self.anchor_praise_hold or self.anchor_coef > 0, "anchor_praise_hold",
+              "needs anchor_coef > 0 (a praise holds the actor through the anchor's pull)")
         check(self.praise_imitation_coef >= 0.0, "praise_imitation_coef",
               f"must be >= 0 (0: praise is not imitated), got {self.praise_imitation_coef}")
         check(self.reproach_avoid_coef >= 0.0, "reproach_avoid_coef",

@@ -52,6 +52,9 @@ class Table2Config(FeedbackRunConfig):
             check(getattr(d, key) == 0, f"pretrain.ddpg.{key}",
                   "is a live session's option (finetune, reproduce live): table2's batched runs have no session "
                   "ring to draw the person's words from; set it to 0")
+        check(not d.anchor_praise_hold, "pretrain.ddpg.anchor_praise_hold",
+              "is a live session's option (finetune, reproduce live): table2's batched runs take no praise on the "
+              "host to hold the actor by; set it to false")
 
 
 # What `reproduce table2` runs without --config (a file shipped with the package, `config.shipped_config`): the
