@@ -146,11 +146,11 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
               + (f", avoiding reproached ones {d.reproach_avoid_coef:g}" if d.reproach_avoid_coef else "")
               + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
               + (f" until {d.anchor_release_events} events have taught it" if d.anchor_coef
-                 and d.anchor_release_events and not d.anchor_praise_hold else "")
-              + (f", a praise holding the actor it praised ({d.anchor_release_events} reproaches let go)"
-                 if d.anchor_coef and d.anchor_praise_hold else "")
+                 and d.anchor_release_events else "")
               + (f" (a praise counting {d.anchor_praise_release:g})" if d.anchor_coef and d.anchor_release_events
                  and d.anchor_praise_release < 1 else "")
+              + (", a praise moving the anchor to the actor it praised" if d.anchor_coef and d.anchor_praise_hold
+                 else "")
               + f"; feedback config {spec.config_path or 'the built-in defaults'}", flush=True)
 
     if learner.kind == "ddpg" and not sc.explore:

@@ -170,22 +170,21 @@ class TamerLearner(ChunkLearner):
 
     def _release_anchor(self, values: list[float]) -> None:
         """Each event the reward model learned from takes 1/`anchor_release_events` off the anchor's weight, a
-        praise `anchor_praise_release` of that; with `anchor_praise_hold` a praise instead makes the actor of this
-        moment the anchor, at weight 1. Weight and anchor live in the train state (saved, restored and replayed with
-        it), not on the host."""
+        praise `anchor_praise_release` of that (below 0: it gives that much back, the weight staying within
+        [0, 1]); with `anchor_praise_hold` a praise also makes the actor of this moment the anchor. Weight and anchor
+        live in the train state (saved, restored and replayed with it), not on the host."""
         d = self.config.ddpg
         if not values or self.state.anchor_weight is None:
             return
         if d.anchor_release_events <= 0 and not d.anchor_praise_hold:
             return
-        weight, hold = float(self.state.anchor_weight), False
-        for v in values:
-            if v > 0 and d.anchor_praise_hold:
-                weight, hold = 1.0, True
-            elif d.anchor_release_events > 0:
-                weight = max(0.0, weight - (1.0 if v < 0 else d.anchor_praise_release) / d.anchor_release_events)
+        weight = float(self.state.anchor_weight)
+        if d.anchor_release_events > 0:
+            for v in values:
+                weight = min(1.0, max(0.0, weight - (1.0 if v < 0 else d.anchor_praise_release)
+                                      / d.anchor_release_events))
         device = jax.devices()[0]
-        if hold:  # a copy: the actor's buffers are donated to every chunk
+        if d.anchor_praise_hold and any(v > 0 for v in values):  # a copy: the actor's buffers are donated
             self.state = self.state.replace(anchor_params=jax.device_put(
                 jax.tree.map(lambda x: jnp.array(x, copy=True), self.state.actor_params), device))
         self.state = self.state.replace(anchor_weight=jax.device_put(np.float32(weight), device))

@@ -174,10 +174,11 @@ def test_the_anchor_lets_go_as_the_person_teaches_and_holds_a_session_nobody_spe
         assert float(learner.state.anchor_weight) == pytest.approx(max(0.0, 1.0 - signs.count(False) / 40), abs=1e-6)
     assert signs.count(True) > 5 and signs.count(False) > 0, signs
 
-    # `ddpg.anchor_praise_hold`: a praise makes the actor of that moment the anchor at weight 1; a reproach lets
-    # 1/N go. The drain runs before the extra updates, so right after a drain with a praise, anchor == actor.
-    learner, cfg, env, clock = toy_learner(anchored + ["pretrain.ddpg.anchor_praise_hold=true"],
-                                           warmup_env_steps=100)
+    # `ddpg.anchor_praise_hold`: a praise makes the actor of that moment the anchor; with `anchor_praise_release`
+    # -1 it gives 1/N of weight back as a reproach takes 1/N. The drain runs before the extra updates, so right
+    # after a drain with a praise, anchor == actor.
+    learner, cfg, env, clock = toy_learner(anchored + ["pretrain.ddpg.anchor_praise_hold=true",
+                                                       "pretrain.ddpg.anchor_praise_release=-1"], warmup_env_steps=100)
     teacher = teacher_for(learner, cfg, env, clock)
     checkpoint_actor = jax.tree.map(np.array, learner.state.anchor_params)
     weight, held = 1.0, 0
@@ -185,7 +186,7 @@ def test_the_anchor_lets_go_as_the_person_teaches_and_holds_a_session_nobody_spe
         _, outcomes = run_chunk(learner, clock, [teacher])
         values = [o.event.value for o in outcomes if o.why is None]
         for v in values:
-            weight = 1.0 if v > 0 else max(0.0, weight - 1 / 40)
+            weight = min(1.0, max(0.0, weight + (1 / 40 if v >= 0 else -1 / 40)))
         assert float(learner.state.anchor_weight) == pytest.approx(weight, abs=1e-6)
         anchor, actor = (jax.tree.leaves(jax.tree.map(np.array, p)) for p in
                          (learner.state.anchor_params, learner.state.actor_params))

@@ -93,13 +93,14 @@ class DDPGConfig:
     # actor freely (docs/human_feedback.md, "Holding still until the person speaks").
     anchor_release_events: int = 0
     # What a praise (an event of positive value) takes off the anchor, as a share of a reproach's 1/N: 1 every
-    # event alike; 0 only reproach lets the anchor go. Praise says "keep doing this": an infant the person is
+    # event alike; 0 only reproach lets the anchor go; below 0 a praise gives that share back (weight at most 1), so
+    # the hold follows the balance of the person's words. Praise says "keep doing this": an infant the person is
     # pleased with then keeps what it does instead of drifting with the intrinsic reward once released.
     anchor_praise_release: float = 1.0
-    # A praise holds what was praised (False: off): the anchor becomes the actor of the moment the praise is taken,
-    # at full weight; reproach lets it go as above. Praise says "keep doing this"; the checkpoint's actor is not what
-    # the person saw once the session has moved it. A session nobody speaks to keeps the checkpoint's anchor; one the
-    # person is pleased with keeps what pleased them; a reproached one learns until the next praise.
+    # A praise holds what was praised (False: off): the anchor becomes the actor of the moment the praise is taken
+    # (its weight as `anchor_praise_release` sets it). The checkpoint's actor is not what the person saw once the
+    # session has moved it. A session nobody speaks to keeps the checkpoint's anchor; with a praise that gives weight
+    # back, one the person is pleased with keeps what pleased them and one mostly reproached learns.
     anchor_praise_hold: bool = False
     # Praise as a demonstration (0: off): the actor is also pulled toward the actions the person praised, weighing
     # `praise_imitation_coef * |mu(s) - a|^2` over (s, a) rows the session's feedback ring credited to praise
@@ -139,8 +140,9 @@ class DDPGConfig:
         check(0.0 <= self.human_critic_gamma < 1.0, "human_critic_gamma",
               f"must be in [0, 1), got {self.human_critic_gamma}")
         check(self.anchor_coef >= 0.0, "anchor_coef", f"must be >= 0, got {self.anchor_coef}")
-        check(0.0 <= self.anchor_praise_release <= 1.0, "anchor_praise_release",
-              f"must be in [0, 1] (1: a praise lets go as much as a reproach), got {self.anchor_praise_release}")
+        check(self.anchor_praise_release <= 1.0, "anchor_praise_release",
+              f"must be <= 1 (1: a praise lets go as much as a reproach; < 0: a praise gives weight back), "
+              f"got {self.anchor_praise_release}")
         check(not self.anchor_praise_hold or self.anchor_coef > 0, "anchor_praise_hold",
               "needs anchor_coef > 0 (a praise holds the actor through the anchor's pull)")
         check(self.praise_imitation_coef >= 0.0, "praise_imitation_coef",
