@@ -99,8 +99,8 @@ class TamerLearner(ChunkLearner):
         if state.human_critic_params is not None:  # the critic of r_hat alone starts on the checkpoint's trunk
             state = state.replace(human_critic_params=human_critic_from(loaded.critic_params),
                                   target_human_critic_params=human_critic_from(loaded.critic_params))
-        if state.anchor_params is not None:  # a copy: the actor's buffers are donated to every chunk
-            state = state.replace(anchor_params=jax.tree.map(lambda x: jnp.array(x, copy=True), loaded.actor_params))
+        if state.anchor_params is not None:
+            state = state.replace(anchor_params=_copy(loaded.actor_params))
         if replay_rows:
             state = state.replace(replay=newest(loaded.replay, self.state.replay.capacity))
         self.state = state
@@ -110,9 +110,7 @@ class TamerLearner(ChunkLearner):
         """Compile the reward model's update and the extra updates before the first event (a first key press
         must not stall a chunk). Neither changes anything: no rows, and zero updates."""
         if self.use_model:
-            jax.block_until_ready(self.model._absorb(
-                jax.tree.map(lambda x: jnp.array(x, copy=True), self.model.state),
-                *self._empty_rows()))
+            jax.block_until_ready(self.model._absorb(_copy(self.model.state), *self._empty_rows()))
         self.state = self.trainer.extra_updates(self.state, self._human_params(), np.int32(0))
 
     def _empty_rows(self):
@@ -184,9 +182,8 @@ class TamerLearner(ChunkLearner):
                 weight = min(1.0, max(0.0, weight - (1.0 if v < 0 else d.anchor_praise_release)
                                       / d.anchor_release_events))
         device = jax.devices()[0]
-        if d.anchor_praise_hold and any(v > 0 for v in values):  # a copy: the actor's buffers are donated
-            self.state = self.state.replace(anchor_params=jax.device_put(
-                jax.tree.map(lambda x: jnp.array(x, copy=True), self.state.actor_params), device))
+        if d.anchor_praise_hold and any(v > 0 for v in values):
+            self.state = self.state.replace(anchor_params=jax.device_put(_copy(self.state.actor_params), device))
         self.state = self.state.replace(anchor_weight=jax.device_put(np.float32(weight), device))
 
     def _silent_steps(self, now: float | None):
@@ -249,6 +246,12 @@ class TamerLearner(ChunkLearner):
 
     def _end_note(self) -> dict:
         return {"dropped": self.assigner.dropped}
+
+
+def _copy(tree):
+    """A copy of a tree of arrays whose buffers a jitted call donates (the actor's to every chunk, the reward
+    model's state to its update)."""
+    return jax.tree.map(lambda x: jnp.array(x, copy=True), tree)
 
 
 def _credit_text(credit) -> str:
