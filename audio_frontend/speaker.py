@@ -5,11 +5,13 @@ learner the way a person's voice does, through the listener process (source -> V
 that the session runs on the measured channel (its misses, wrong signs and latency) and not on a model of it.
 
 - `SpeakerBank`: one espeak-ng voice's utterances (testset's sentences: praise in the positive tone, reproach
-  in the angry one, fillers in the filler style, and the neutral calibration sentences), synthesised once
-  into a folder with a manifest, and reused while voice, seed, rate and recipe match.
+  in the angry one, fillers in the filler style, and the neutral calibration sentences; and single words of
+  praise and reproach, `SPEAKER_WORDS`, for a speaker who talks fast), synthesised once into a folder with a
+  manifest, and reused while voice, seed, rate and recipe match.
 - `SpeakerSource`: an `AudioSource` that plays like a microphone at real-time pace (background noise; each
   chunk delivered once its last sample is due, stamped with the wall-clock time of its first sample) and
-  says what the learner asks for on a command queue, reporting each utterance it plays on a "spoken" queue.
+  says what the learner asks for on a command queue, reporting each utterance it plays on a "spoken" queue;
+  in sentences (`says="sentences"`, the test sentences) or in single words (`says="words"`).
   It is picklable and loads the bank in the process that plays it (the spawned listener).
 - `calibrate_speaker`: that voice's prosody calibration from the bank's calibration sentences through the
   code `protamer calibrate --wav-dir` uses, so a session can use `--feedback prosody` with nobody recording.
@@ -44,7 +46,7 @@ import numpy as np
 from audio_frontend.errors import AudioInputError
 from audio_frontend.sources import AudioSource
 
-BANK_FORMAT = 1
+BANK_FORMAT = 2  # 2: utterances have a `form` (sentence, word, filler)
 MANIFEST = "speaker_bank.json"
 LABELS = "labels.jsonl"
 # Short on purpose: in a stream the silence around an utterance is the stream's own; the test set's long
@@ -62,10 +64,17 @@ END = "end"
 KIND_OF_TONE = {"pos": ("praise", 1), "neg": ("reproach", -1), "fillers": ("filler", 0), "neu": ("neutral", 0)}
 _CALIBRATION_LABEL = {"pos": "pos", "neg": "neg", "fillers": "filler", "neu": "neu"}
 COMMAND_KEYS = {"id", "t", "sign", "pick"}
+# What a speaker who talks fast says: one word of praise or reproach, in the matching tone (testset's probe
+# keywords; "okay" left out: it is as often lukewarm as praise). Whisper + rules got these right 143 of 156 on
+# the probe voices (docs/voice.md). Not calibration material: the prosody calibration stays on sentences.
+SPEAKER_WORDS = (["yes", "yeah", "good", "great", "nice", "perfect", "excellent"],
+                 ["no", "nope", "bad", "wrong", "stop"])
+SAYS = ("sentences", "words")
 
 
 def bank_plan() -> list[dict]:
-    """What the bank holds: testset's calibration lists (flagged `calibration`) and its test lists."""
+    """What the bank holds: testset's calibration lists (flagged `calibration`), its test lists, and the single
+    words (last, so that the sentences' jitter draws are those of a bank without them)."""
     from audio_frontend.testset import FILLERS, NEGATIVE, NEUTRAL, POSITIVE
 
     rows = []
@@ -74,8 +83,12 @@ def bank_plan() -> list[dict]:
         if split == 0:
             groups.append(("neu", NEUTRAL))
         for tone, lists in groups:
-            rows += [dict(id=f"{tone}-{name}-{i:02d}", text=text, tone=tone, calibration=split == 0)
+            rows += [dict(id=f"{tone}-{name}-{i:02d}", text=text, tone=tone, calibration=split == 0,
+                          form="filler" if tone == "fillers" else "sentence")
                      for i, text in enumerate(lists[split])]
+    for tone, words in (("pos", SPEAKER_WORDS[0]), ("neg", SPEAKER_WORDS[1])):
+        rows += [dict(id=f"{tone}-word-{i:02d}", text=w, tone=tone, calibration=False, form="word")
+                 for i, w in enumerate(words)]
     return rows
 
 
@@ -97,6 +110,7 @@ class BankUtterance:
     kind: str               # praise, reproach, filler, neutral
     sign: int               # +1, -1, 0
     calibration: bool       # one of testset's calibration sentences (not said in a session by default)
+    form: str               # sentence, word (one keyword) or filler
     file: str               # relative to the bank folder
     duration_s: float       # the whole file, pads included
     speech_start_s: float   # where the words begin and end in the file (speech_bounds: within 30 dB of the peak)
@@ -166,7 +180,7 @@ class SpeakerBank:
                 start, end = speech_bounds(x, sample_rate)
                 kind, sign = KIND_OF_TONE[row["tone"]]
                 labels.append(BankUtterance(id=row["id"], text=row["text"], tone=row["tone"], kind=kind, sign=sign,
-                                            calibration=row["calibration"], file=file,
+                                            calibration=row["calibration"], form=row["form"], file=file,
                                             duration_s=x.size / sample_rate, speech_start_s=float(start),
                                             speech_end_s=float(end)))
             (tmp / LABELS).write_text("".join(json.dumps(asdict(u), sort_keys=True) + "\n" for u in labels),
@@ -229,9 +243,11 @@ class SpeakerBank:
             self._audio[utt_id] = x
         return self._audio[utt_id]
 
-    def pool(self, sign: int, include_calibration: bool = False) -> list[BankUtterance]:
-        """What the speaker says for `sign`: praise, reproach or fillers (neutral sentences only by pick)."""
-        return [u for u in self.utterances if u.sign == sign and u.kind != "neutral"
+    def pool(self, sign: int, include_calibration: bool = False, says: str = "sentences") -> list[BankUtterance]:
+        """What the speaker says for `sign`: praise or reproach in sentences or single words (`says`), or fillers
+        (neutral sentences only by pick)."""
+        form = "filler" if sign == 0 else {"sentences": "sentence", "words": "word"}[says]
+        return [u for u in self.utterances if u.sign == sign and u.form == form
                 and (include_calibration or not u.calibration)]
 
 
@@ -300,14 +316,14 @@ class _Schedule:
     """What the speaker will say and when, in samples of the stream; the source paces and delivers it."""
 
     def __init__(self, bank: SpeakerBank, t0: float, sample_rate: int, chunk: int, gap_s: float, seed: int,
-                 include_calibration: bool):
+                 include_calibration: bool, says: str = "sentences"):
         self.bank = bank
         self.t0 = t0
         self.sr = sample_rate
         self.n = chunk
         self.gap = int(round(gap_s * sample_rate))
         self.include_calibration = include_calibration
-        self.picker = _Picker({s: bank.pool(s, include_calibration) for s in (1, -1, 0)}, seed)
+        self.picker = _Picker({s: bank.pool(s, include_calibration, says) for s in (1, -1, 0)}, seed)
         self.plays: list[_Play] = []
         self.free_at = 0      # the first sample the next words may start at (after the last words + the pause)
 
@@ -372,12 +388,15 @@ class SpeakerSource(AudioSource):
     queues of `make_speaker_channel` (spoken may be None: no reports); noise_dbfs: white background noise
     (None: digital silence), seeded by `seed`, which also seeds the choice of utterances; include_calibration:
     also say the sentences `calibrate_speaker` fits on (by default a session hears only unseen sentences);
-    gap_s: the pause after an utterance before the next one is said.
+    gap_s: the pause after an utterance before the next one is said; says: what praise and reproach are said in,
+    "sentences" (the test sentences) or "words" (`SPEAKER_WORDS`; a command's `pick` may name any utterance).
     """
 
     def __init__(self, bank_dir: str | Path, commands, spoken=None, sample_rate: int = 16000, chunk_s: float = 0.25,
                  noise_dbfs: float | None = DEFAULT_NOISE_DBFS, seed: int = 0, include_calibration: bool = False,
-                 gap_s: float = GAP_S):
+                 gap_s: float = GAP_S, says: str = "sentences"):
+        if says not in SAYS:
+            raise ValueError(f"says must be one of {', '.join(SAYS)}, got {says!r}")
         self.bank_dir = str(bank_dir)
         self.commands = commands
         self.spoken = spoken
@@ -387,6 +406,7 @@ class SpeakerSource(AudioSource):
         self.seed = seed
         self.include_calibration = include_calibration
         self.gap_s = gap_s
+        self.says = says
         self._stop = threading.Event()
 
     @classmethod
@@ -422,7 +442,7 @@ class SpeakerSource(AudioSource):
         noise = np.random.default_rng([int(self.seed), 0])
         sigma = None if self.noise_dbfs is None else 10 ** (self.noise_dbfs / 20)
         t0 = time.time()
-        schedule = _Schedule(bank, t0, sr, n, self.gap_s, self.seed, self.include_calibration)
+        schedule = _Schedule(bank, t0, sr, n, self.gap_s, self.seed, self.include_calibration, self.says)
         i = 0
         while not self._stop.is_set():
             due = t0 + (i + 1) * n / sr

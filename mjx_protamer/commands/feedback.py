@@ -71,10 +71,11 @@ def register(subparsers) -> None:
     w.add_argument("--replay", type=Path, default=None, metavar="SESSION_DIR",
                    help="rerun a recorded session headless into --out, reaching the same final parameters")
     v = p.add_argument_group("voice (--feedback prosody|whisper)")
-    v.add_argument("--listen-source", default="mic", metavar="mic|wav:PATH|speaker",
+    v.add_argument("--listen-source", default="mic", metavar="mic|wav:PATH|speaker|speaker:words",
                    help="the microphone (default), a WAV file played at real-time pace (the run ends with it), or "
                    "speaker: a simulated person who watches the infant and speaks praise or reproach by the "
-                   "config's hidden teacher rule (synthesised speech through the real listener)")
+                   "config's hidden teacher rule (synthesised speech through the real listener), in sentences; "
+                   "speaker:words: the same person in single words (\"yes\", \"no\"), about one a second")
     v.add_argument("--voice-config", default=None, help="front-end YAML (default: configs/voice.yaml)")
     v.add_argument("--voice-set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a voice config field, e.g. --voice-set prosody.tau=0.2 (repeatable)")

@@ -101,6 +101,10 @@ def register(subparsers) -> None:
     v.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="a session setting for every session, e.g. --set pretrain.ddpg.human_actor_coef=0 (the "
                    "paper's alpha r_env + beta r_hat DDPG)")
+    v.add_argument("--speaker", choices=("sentences", "words"), default="sentences",
+                   help="what the simulated speaker of the prosody and whisper sessions says praise and reproach "
+                   "in: sentences (default, about one in 1.4 s) or single words (\"yes\", \"no\": about one a "
+                   "second)")
     v.add_argument("--episodes", default=10, help="test episodes per actor (default 10)")
     v.add_argument("--parallel", default=1, help="unpaced sessions at once (default 1)")
     v.add_argument("--learner", choices=("ddpg", "coach"), default="ddpg",
@@ -243,6 +247,9 @@ def _live(args: argparse.Namespace) -> int:
     if bad or not channels:
         raise ConfigError(f"--channels: {', '.join(bad) or 'none given'}; use keyboard, prosody and/or whisper")
     check_config_file(args.rule_config, "--rule-config")
+    if args.speaker != "sentences" and not {"prosody", "whisper"} & set(channels):
+        raise ConfigError(f"--speaker {args.speaker}: only the prosody and whisper sessions have a speaker; add one "
+                          "of them to --channels or leave --speaker out")
     minutes = number("--minutes", args.minutes, 0.01, 600)
     snapshot_minutes = number("--snapshot-minutes", args.snapshot_minutes, 0.0, 600)
     episodes = number("--episodes", args.episodes, 1, 1000, integer=True)
@@ -265,7 +272,7 @@ def _live(args: argparse.Namespace) -> int:
                 enable_compile_cache()
             checkpoints = pretrain_checkpoints(out, seeds) if seeds is not None else args.checkpoints
             plan = Plan(tuple(Path(c) for c in checkpoints), out, channels, minutes, 250.0, args.rule_config,
-                        tuple(args.overrides), episodes, parallel, args.learner, snapshot_minutes)
+                        tuple(args.overrides), episodes, parallel, args.learner, snapshot_minutes, args.speaker)
             summary = run_live_effect(plan)
         except OSError as e:  # a full disk, no permission: one line
             from mjx_protamer.errors import write_failed

@@ -8,7 +8,7 @@ the built-in lateral rule by default):
   updates per shown step, the no-feedback session's too);
 - prosody, whisper: `--listen-source speaker`: the simulated person speaks through the real listener (VAD ->
   prosody or Whisper + sentiment), so these sessions run paced at real time, with at most the same updates per
-  shown step as the others.
+  shown step as the others; in sentences, or in single words (`speaker="words"`: `speaker:words`).
 Each final actor then runs the checkpoint's own test episodes (deterministic actor, its test seed), scored by the
 hidden rule (`teacher_score`) and the paper's metrics. Per channel: the paired difference teacher - no feedback
 over checkpoints (mean, 95% CI, per checkpoint), the drift of the no-feedback sessions from the checkpoint, the
@@ -54,6 +54,7 @@ class Plan:
     parallel: int = 1  # unpaced sessions at once (paced ones always run alone)
     learner: str = "ddpg"  # or "coach": Deep COACH from the checkpoint's actor (its no-feedback arm is the start)
     snapshot_minutes: float = 0.0  # every session's policy also scored at each multiple of this (a curve); 0: none
+    speaker: str = "sentences"  # what the simulated speaker of the voice channels says: sentences or words
 
     @property
     def chunks(self) -> int:
@@ -78,7 +79,7 @@ def _session_argv(plan: Plan, ckpt: Path, arm: str, seed: int, out: Path) -> lis
     if arm in ("none", "keyboard"):
         argv += ["--feedback", "none" if arm == "none" else "simulated:keyboard", "--no-pace"]
     else:  # the simulated speaker, at real-time pace, no more updates per shown step than the unpaced sessions
-        argv += ["--feedback", arm, "--listen-source", "speaker"]
+        argv += ["--feedback", arm, "--listen-source", "speaker" if plan.speaker == "sentences" else "speaker:words"]
     for o in plan.overrides:
         argv += ["--set", o]
     if arm in ("prosody", "whisper"):
@@ -366,9 +367,10 @@ def markdown(summary: dict) -> str:
     for arm, c in summary["paired"].items():
         if "speaker" in c:
             s = c["speaker"]
-            lines.append(f"- {arm} through the simulated speaker: said {s['said']}, delivered {s['delivered']}, "
-                         f"missed {s['missed']}, sign accuracy {s['sign_accuracy_mean']}, latency from the end of "
-                         f"the words {s['latency_s_median_of_sessions']} s (median of sessions)")
+            says = summary["plan"].get("speaker", "sentences")
+            lines.append(f"- {arm} through the simulated speaker (in {says}): said {s['said']}, delivered "
+                         f"{s['delivered']}, missed {s['missed']}, sign accuracy {s['sign_accuracy_mean']}, latency "
+                         f"from the end of the words {s['latency_s_median_of_sessions']} s (median of sessions)")
     return "\n".join(lines) + "\n"
 
 

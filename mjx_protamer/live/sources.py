@@ -207,4 +207,5 @@ def voice_setup(voice_config_path, voice_set, listen_source: str):
         source = make_source(cfg, wav=listen_source[4:], realtime=True)
         _ = source.audio  # a missing, corrupt or silent file fails here, with its reason
         return cfg, source
-    raise ConfigError(f"--listen-source must be 'mic', 'wav:PATH' or 'speaker', got {listen_source!r}")
+    raise ConfigError(f"--listen-source must be 'mic', 'wav:PATH', 'speaker' or 'speaker:words', got "
+                      f"{listen_source!r}")

@@ -1,5 +1,6 @@
 """A simulated person who watches the infant and speaks (`finetune --feedback prosody|whisper --listen-source
-speaker`): the voice channels end to end, with nobody at the microphone.
+speaker`, or `speaker:words` for one who speaks in single words): the voice channels end to end, with nobody at
+the microphone.
 
 A host teacher with the session's hidden rule (`feedback.teacher`) scores each chunk's steps as they are shown;
 when it decides to give feedback it waits its reaction delay (the voice channel's: prosody 0.6 +- 0.2 s, speech
@@ -7,7 +8,9 @@ when it decides to give feedback it waits its reaction delay (the voice channel'
 SpeakerSource`, which plays a synthesised sentence in the matching tone (the synth-voice set's sentences, one
 espeak-ng voice) at real-time pace into the real listener process: VAD -> prosody (calibrated on that voice's
 calibration sentences, `calibrate_speaker`) or Whisper + sentiment -> the learner's queue. Like a person, it
-does not talk over itself: a decision while it is still speaking (or pausing after) is not said.
+does not talk over itself: a decision while it is still speaking (or pausing after) is not said. In sentences
+("that's it, perfect") it says about one thing in 1.4 s; in single words ("yes", "no") about one a second, the
+rate at which a keyboard teacher's words taught (docs/human_feedback.md, "How often a teacher must speak").
 
 What it meant and what the pipeline delivered are kept side by side: `OUT/speaker.jsonl` has one line per
 utterance (the step it was about, the sign meant, when the words were said, the event delivered: its value,
@@ -27,7 +30,9 @@ import numpy as np
 from mjx_protamer.live.sources import Source, VoiceSource
 
 VOICE = "en-us"  # the speaker's espeak-ng voice (the synth-voice set's first)
-SPEAKING_S = 0.9  # an utterance's typical length: the speaker is busy this long after it starts, plus the pause
+# An utterance's typical length (the bank's test sentences average 0.91 s of words, its single words 0.45 s): the
+# speaker is busy this long after it starts, plus the pause (audio_frontend.speaker.GAP_S).
+SPEAKING_S = {"sentences": 0.9, "words": 0.45}
 MATCH_BEFORE_S, MATCH_AFTER_S = 0.6, 0.3  # an event belongs to an utterance if its segment starts this close
 
 
@@ -78,15 +83,18 @@ class SimulatedSpeaker(Source):
     def __init__(self, spec, queue, env, segment: int):
         import multiprocessing as mp
 
-        from audio_frontend.speaker import SpeakerSource, make_speaker_channel
+        from audio_frontend.speaker import GAP_S, SpeakerSource, make_speaker_channel
         from mjx_protamer.human.teachers import HostTeacher, env_signal_columns
 
         fc = spec.config.feedback
         cfg = speaker_voice_config(spec)
         seed = fc.seed + 7919 * segment
         self.commands, self.spoken = make_speaker_channel(mp.get_context("spawn"))
-        audio = SpeakerSource.from_config(cfg, _bank_dir(VOICE, fc.seed % 4), self.commands, self.spoken, seed=seed)
-        self.voice = VoiceSource(queue, cfg, spec.feedback, audio, "speaker",
+        self.says = spec.speaker_says
+        self.busy_s = SPEAKING_S[self.says] + GAP_S  # from the start of its words until it may speak again
+        audio = SpeakerSource.from_config(cfg, _bank_dir(VOICE, fc.seed % 4), self.commands, self.spoken, seed=seed,
+                                          says=self.says)
+        self.voice = VoiceSource(queue, cfg, spec.feedback, audio, spec.listen_source,
                                  spec.save_segments or str(spec.out / "segments"))
         teacher = speaker_teacher(fc.teacher, spec.feedback)
         self.teacher = HostTeacher(teacher, fc.dt, seed=seed)
@@ -119,7 +127,7 @@ class SimulatedSpeaker(Source):
                 continue
             cid = self._next_id
             self._next_id += 1
-            self.busy_until = event.t_start + SPEAKING_S + 0.5
+            self.busy_until = event.t_start + self.busy_s
             self.meant[cid] = {"id": cid, "about_step": event.details["about_step"], "sign": float(np.sign(event.value)),
                                "score": event.details["score"], "requested_t": event.t_start}
             self.commands.put({"id": cid, "t": event.t_start, "sign": int(np.sign(event.value))})
@@ -153,7 +161,8 @@ class SimulatedSpeaker(Source):
         return self.voice.exit_code
 
     def ready_line(self) -> str:
-        return "the simulated speaker watches and speaks (its words go through the real listener)"
+        return (f"the simulated speaker watches and speaks in {self.says} (its words go through the real "
+                "listener)")
 
     def stop(self) -> None:
         from audio_frontend.speaker import END

@@ -21,6 +21,7 @@ LIVE = ("keyboard", "prosody", "whisper", "web")
 SIMULATED = ("simulated:keyboard", "simulated:prosody", "simulated:speech")
 FEEDBACK_CHOICES = (*LIVE, *SIMULATED, "none")
 LEARNERS = ("ddpg", "coach")
+SPEAKER_SOURCES = ("speaker", "speaker:words")  # the simulated speaker, in sentences or in single words
 # A session's feedback config without --config (the channel follows --feedback: the shipped files differ in it
 # alone). Without it a session would run the dataclass defaults: an unbounded reward model, no silences, beta 0.1.
 DEFAULT_FEEDBACK_CONFIG = shipped_config("feedback_keyboard.yaml")
@@ -85,7 +86,12 @@ class SessionSpec:
 
     @property
     def speaker(self) -> bool:
-        return self.voice and self.listen_source == "speaker"
+        return self.voice and self.listen_source in SPEAKER_SOURCES
+
+    @property
+    def speaker_says(self) -> str:
+        """What the simulated speaker says praise and reproach in: sentences, or single words (speaker:words)."""
+        return "words" if self.listen_source == "speaker:words" else "sentences"
 
     def ddpg_overrides(self) -> dict:
         """The DDPG values a session takes from its feedback config (the rest is the checkpoint's)."""
@@ -157,12 +163,13 @@ class SessionSpec:
             if self.view != "web":
                 raise ConfigError("feedback.credit.silence_needs_attention counts a silence only while the live "
                                   "page is visible: it needs --view web (or set it false)")
-        if self.voice and not (self.listen_source in ("mic", "speaker") or (self.listen_source.startswith("wav:")
-                                                                              and len(self.listen_source) > 4)):
-            raise ConfigError(f"--listen-source must be 'mic', 'wav:PATH' or 'speaker', got {self.listen_source!r}")
+        if self.voice and not (self.listen_source in ("mic", *SPEAKER_SOURCES)
+                               or (self.listen_source.startswith("wav:") and len(self.listen_source) > 4)):
+            raise ConfigError(f"--listen-source must be 'mic', 'wav:PATH', 'speaker' or 'speaker:words', got "
+                              f"{self.listen_source!r}")
         if self.speaker and not self.pace:
-            raise ConfigError("--listen-source speaker speaks at real-time pace into the listener: leave out "
-                              "--no-pace")
+            raise ConfigError(f"--listen-source {self.listen_source} speaks at real-time pace into the listener: "
+                              "leave out --no-pace")
         if self.coach_policy is not None and not Path(self.coach_policy).exists():
             raise ConfigError(f"--coach-policy {self.coach_policy}: no such file or directory (the --out of an "
                               "earlier `protamer finetune --learner coach`)")

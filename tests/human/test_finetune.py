@@ -181,7 +181,10 @@ def test_silences_gated_on_attention_without_the_live_page_is_a_clear_error(tmp_
 
 def test_bad_listen_source_and_missing_wav(tmp_path, capsys):
     assert run_main("--feedback", "whisper", "--listen-source", "bogus", "--checkpoint", tmp_path) == 2
-    assert "--listen-source must be 'mic', 'wav:PATH' or 'speaker'" in capsys.readouterr().err
+    assert "--listen-source must be 'mic', 'wav:PATH', 'speaker' or 'speaker:words'" in capsys.readouterr().err
+    assert run_main("--feedback", "prosody", "--listen-source", "speaker:words", "--no-pace", "--checkpoint",
+                    tmp_path) == 2
+    assert "--listen-source speaker:words speaks at real-time pace" in capsys.readouterr().err
     code = run_main("--feedback", "whisper", "--listen-source", f"wav:{tmp_path / 'none.wav'}", "--checkpoint", tmp_path)
     assert code == 3 and "none.wav" in capsys.readouterr().err
 

@@ -21,7 +21,9 @@ RULE = "feedback.teacher.rule=[{signal: 'action:0', value: 1.0, above: 0.0}, {si
 
 
 @pytest.mark.audio
-def test_the_speakers_words_reach_the_learner_as_events_whose_credit_covers_the_step_it_meant(toy_run, tmp_path):
+@pytest.mark.parametrize("source", ["speaker", "speaker:words"])
+def test_the_speakers_words_reach_the_learner_as_events_whose_credit_covers_the_step_it_meant(toy_run, tmp_path,
+                                                                                              source):
     from audio_frontend.synth import missing_tools
 
     if missing_tools():
@@ -31,7 +33,7 @@ def test_the_speakers_words_reach_the_learner_as_events_whose_credit_covers_the_
     env = {**os.environ, "JAX_PLATFORMS": "cpu", "PYTHONUNBUFFERED": "1",
            "PROTAMER_SPEAKER_CACHE": str(tmp_path / "speaker-cache")}
     p = subprocess.run([sys.executable, "-m", "mjx_protamer.cli", "finetune", "--checkpoint", str(toy_run),
-                        "--out", str(out), "--view", "none", "--feedback", "prosody", "--listen-source", "speaker",
+                        "--out", str(out), "--view", "none", "--feedback", "prosody", "--listen-source", source,
                         "--seconds", "15", "--set", RULE],
                        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600)
     text = p.stdout + p.stderr
@@ -54,4 +56,9 @@ def test_the_speakers_words_reach_the_learner_as_events_whose_credit_covers_the_
     assert len(accepted) >= len(delivered) and "accepted, credited steps" in text
     assert "[speaker] said" in text and "[voice] prosody" in text
     manifest = json.loads((out / "session.json").read_text())
-    assert manifest["listen_source"] == "speaker" and manifest["measured_pace"][-1]["realtime"] > 0.9
+    assert manifest["listen_source"] == source and manifest["measured_pace"][-1]["realtime"] > 0.9
+    # in sentences, or (speaker:words) one keyword at a time, about one a second
+    from audio_frontend.speaker import SPEAKER_WORDS
+
+    words = {w for group in SPEAKER_WORDS for w in group}
+    assert all((r["said"] in words) == (source == "speaker:words") for r in said), [r["said"] for r in said]
