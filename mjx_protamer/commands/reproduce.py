@@ -91,6 +91,10 @@ def register(subparsers) -> None:
     src.add_argument("--checkpoints", type=Path, nargs="+", help="pretrain runs, one per seed")
     src.add_argument("--pretrain-seeds", help="pretrain the main job for seeds 0..N-1 first, as `protamer pretrain "
                      "--seeds N --out OUT/checkpoints` does (finished seeds are kept)")
+    src.add_argument("--merge", type=Path, nargs="+", metavar="RUN",
+                     help="pool finished runs of one plan over different checkpoints (their --out directories, e.g. "
+                     "groups of checkpoints run on different machines) into one result in --out; the plan is "
+                     "theirs")
     v.add_argument("--channels", default="keyboard", help="comma-separated: keyboard, prosody, whisper "
                    "(default keyboard)")
     v.add_argument("--minutes", default=2.0, help="shown time per session (default 2)")
@@ -235,6 +239,54 @@ def _rescore(args: argparse.Namespace) -> int:
     return 0
 
 
+def _live_merge(args: argparse.Namespace) -> int:
+    from mjx_protamer.config import ConfigError
+    from mjx_protamer.live.merge import check_runs, merge_live_effects
+    from mjx_protamer.outdir import claimed, kind_of
+
+    def differs(value, default) -> bool:
+        if isinstance(default, (int, float)):
+            try:
+                return float(value) != float(default)
+            except (TypeError, ValueError):
+                return True
+        return value != default
+
+    plan_flags = (("--channels", args.channels, "keyboard"), ("--minutes", args.minutes, 2.0),
+                  ("--rule-config", args.rule_config, None), ("--set", args.overrides, []),
+                  ("--speaker", args.speaker, "sentences"), ("--episodes", args.episodes, 10),
+                  ("--parallel", args.parallel, 1), ("--learner", args.learner, "ddpg"),
+                  ("--snapshot-minutes", args.snapshot_minutes, 0.0))
+    given = [flag for flag, value, default in plan_flags if differs(value, default)]
+    if given:
+        raise ConfigError(f"--merge pools runs with the plan they ran; leave out {', '.join(given)}")
+    out = args.out
+    check_runs(args.merge, out)
+    # a pooled result written before is replaced; a run with sessions never is (its --out must be new or empty)
+    ours = out.is_dir() and kind_of(out) == LIVE and "merged_from" in _read_json(out / "live_effect.json")
+    with claimed(out, LIVE, resume=ours):
+        try:
+            summary = merge_live_effects(args.merge, out, " ".join(sys.argv))
+        except OSError as e:  # a full disk, no permission: one line
+            from mjx_protamer.errors import write_failed
+
+            raise write_failed(e, out, "the runs it pools are untouched", "run the same command again") from None
+    print((out / "live_effect.md").read_text())
+    figures = f"{out / 'live_effect.png'}" + (f", {out / 'live_curve.png'}" if "curve" in summary else "")
+    print(f"json {out / 'live_effect.json'}\nfigure {figures}")
+    return 0
+
+
+def _read_json(path: Path) -> dict:
+    import json
+
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def _live(args: argparse.Namespace) -> int:
     from mjx_protamer.cli_numbers import number
     from mjx_protamer.config import ConfigError
@@ -242,6 +294,8 @@ def _live(args: argparse.Namespace) -> int:
     from mjx_protamer.live.spec import check_config_file
     from mjx_protamer.outdir import claimed, kind_of
 
+    if args.merge:
+        return _live_merge(args)
     channels = tuple(c.strip() for c in args.channels.split(",") if c.strip())
     bad = [c for c in channels if c not in CHANNELS]
     if bad or not channels:

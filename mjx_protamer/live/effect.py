@@ -210,8 +210,6 @@ def _session_facts(out: Path) -> dict:
 
 def run_live_effect(plan: Plan, log=print) -> dict:
     """Every session of the plan (kept where finished), then the scores, the statistics, the figure."""
-    from mjx_protamer.experiments.stats import contrast, seed_stats
-
     plan.out.mkdir(parents=True, exist_ok=True)
     arms = ("none", *plan.channels)
     # Deep COACH learns from corrections alone: without feedback its policy stays the checkpoint's actor, so its
@@ -249,13 +247,26 @@ def run_live_effect(plan: Plan, log=print) -> dict:
         rows.append(row)
         log(f"[live] checkpoint {k}: teacher score start {row['start']['teacher_score']:+.3f}, "
             + ", ".join(f"{a} {row[a]['teacher_score']:+.3f}" for a in arms))
-    summary = {"plan": {**{k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(plan).items()},
-                        "checkpoints": [str(c) for c in plan.checkpoints], "out": str(plan.out)},
-               "command": " ".join(sys.argv), "per_checkpoint": rows, "wall_s": time.perf_counter() - t0,
+    plan_record = {**{k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(plan).items()},
+                   "checkpoints": [str(c) for c in plan.checkpoints], "out": str(plan.out),
+                   "rule": rule_override(plan.rule_config)}
+    summary = summarize(plan_record, rows, " ".join(sys.argv), time.perf_counter() - t0)
+    write_outputs(summary, plan.out)
+    return summary
+
+
+def summarize(plan: dict, rows: list[dict], command: str, wall_s: float) -> dict:
+    """The statistics over checkpoints of per-checkpoint rows: a run's (`run_live_effect`), or several runs' of one
+    plan pooled (live/merge.py). `plan` is the run's plan as recorded (channels, snapshot_minutes, ...)."""
+    from mjx_protamer.experiments.stats import contrast, seed_stats
+
+    channels = tuple(plan["channels"])
+    arms = ("none", *channels)
+    summary = {"plan": plan, "command": command, "per_checkpoint": rows, "wall_s": wall_s,
                "pooled": {}, "paired": {}, "drift": {}}
     for arm in ("start", *arms):
         summary["pooled"][arm] = {m: seed_stats([r[arm][m] for r in rows]) for m in METRICS}
-    for arm in plan.channels:
+    for arm in channels:
         summary["paired"][arm] = {m: contrast([r["none"][m] for r in rows], [r[arm][m] for r in rows])
                                   for m in METRICS}
         voice = [r[arm].get("speaker") for r in rows if r[arm].get("speaker")]
@@ -263,17 +274,22 @@ def run_live_effect(plan: Plan, log=print) -> dict:
             summary["paired"][arm]["speaker"] = _pool_speaker(voice)
     summary["drift"] = {m: seed_stats([r["none"][m] - r["start"][m] for r in rows]) for m in METRICS}
     # whether the reward model learned the rule, apart from whether the policy followed it: r_hat against the
-    # hidden score on each arm's final test steps (the no-feedback arm's model never took an event: a baseline)
+    # hidden score on each arm's final test steps (the no-feedback arm's model never took an event: a baseline;
+    # an arm that ran no session, Deep COACH's no-feedback one, has none)
     summary["r_hat_corr"] = {arm: seed_stats([r[arm]["r_hat_corr"] for r in rows])
-                             for arm in ("start", *ran) if all(r[arm].get("r_hat_corr") is not None for r in rows)}
-    if plan.snapshot_minutes > 0:
-        summary["curve"] = curve(rows, arms, plan.channels)
-    write_atomic(plan.out / "live_effect.json", json.dumps(summary, indent=1))
-    write_atomic(plan.out / "live_effect.md", markdown(summary))
-    figure(summary, plan.out / "live_effect.png")
-    if "curve" in summary:
-        curve_figure(summary, plan.out / "live_curve.png")
+                             for arm in ("start", *arms) if all(r[arm].get("r_hat_corr") is not None for r in rows)}
+    if plan.get("snapshot_minutes", 0) > 0:
+        summary["curve"] = curve(rows, arms, channels)
     return summary
+
+
+def write_outputs(summary: dict, out: Path) -> None:
+    """live_effect.json, .md and .png (and live_curve.png with snapshots) into `out`, each written atomically."""
+    write_atomic(out / "live_effect.json", json.dumps(summary, indent=1))
+    write_atomic(out / "live_effect.md", markdown(summary))
+    figure(summary, out / "live_effect.png")
+    if "curve" in summary:
+        curve_figure(summary, out / "live_curve.png")
 
 
 def _score_snapshots(session: Path, score, like) -> list[dict]:
@@ -339,6 +355,9 @@ def markdown(summary: dict) -> str:
              "", f"Rule: {plan['rule_config'] or 'the built-in default (lateral: right hand +1, left -1)'}; "
              f"session settings {plan['overrides'] or 'as shipped'}; mean ± 95% CI over checkpoints.", "",
              "| | " + " | ".join(METRICS) + " |", "|---|" + "---|" * len(METRICS)]
+    if summary.get("merged_from"):
+        lines[2:2] = ["Pooled from " + ", ".join(f"{m['run']} ({len(m['checkpoints'] or [])} checkpoints)"
+                                              for m in summary["merged_from"]) + " (`--merge`).", ""]
     for arm, st in summary["pooled"].items():
         lines.append(f"| {arm} | " + " | ".join(_cell(st[m]) for m in METRICS) + " |")
     for arm, c in summary["paired"].items():
@@ -368,9 +387,11 @@ def markdown(summary: dict) -> str:
         if "speaker" in c:
             s = c["speaker"]
             says = summary["plan"].get("speaker", "sentences")
+            num = lambda v, d: "-" if v is None else f"{v:.{d}f}"
             lines.append(f"- {arm} through the simulated speaker (in {says}): said {s['said']}, delivered "
-                         f"{s['delivered']}, missed {s['missed']}, sign accuracy {s['sign_accuracy_mean']}, latency "
-                         f"from the end of the words {s['latency_s_median_of_sessions']} s (median of sessions)")
+                         f"{s['delivered']}, missed {s['missed']}, sign accuracy {num(s['sign_accuracy_mean'], 3)}, "
+                         f"latency from the end of the words {num(s['latency_s_median_of_sessions'], 2)} s (median "
+                         "of sessions)")
     return "\n".join(lines) + "\n"
 
 
