@@ -14,6 +14,8 @@ from mjx_protamer.commands.processes import add_process_flags, processes_of
 
 
 def register(subparsers) -> None:
+    from mjx_protamer.live.spec import SPEAKER_SOURCES
+
     p = subparsers.add_parser(
         "reproduce",
         help="reproduce the paper's experiments with simulated teachers",
@@ -105,7 +107,7 @@ def register(subparsers) -> None:
     v.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="a session setting for every session, e.g. --set pretrain.ddpg.human_actor_coef=0 (the "
                    "paper's alpha r_env + beta r_hat DDPG)")
-    v.add_argument("--speaker", choices=("sentences", "words"), default="sentences",
+    v.add_argument("--speaker", choices=tuple(SPEAKER_SOURCES), default="sentences",
                    help="what the simulated speaker of the prosody and whisper sessions says praise and reproach "
                    "in: sentences (default, about one in 1.4 s) or single words (\"yes\", \"no\": about one a "
                    "second)")

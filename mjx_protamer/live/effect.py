@@ -70,6 +70,8 @@ def rule_override(rule_config) -> str:
 
 
 def _session_argv(plan: Plan, ckpt: Path, arm: str, seed: int, out: Path) -> list[str]:
+    from mjx_protamer.live.spec import SPEAKER_SOURCES
+
     argv = [sys.executable, "-m", "mjx_protamer.cli", "finetune", "--checkpoint", str(ckpt), "--out", str(out),
             "--view", "none", "--chunk-ms", str(plan.chunk_ms), "--max-chunks", str(plan.chunks),
             "--autosave-s", "0", "--set", rule_override(plan.rule_config), "--set", f"feedback.seed={seed}"]
@@ -79,7 +81,7 @@ def _session_argv(plan: Plan, ckpt: Path, arm: str, seed: int, out: Path) -> lis
     if arm in ("none", "keyboard"):
         argv += ["--feedback", "none" if arm == "none" else "simulated:keyboard", "--no-pace"]
     else:  # the simulated speaker, at real-time pace, no more updates per shown step than the unpaced sessions
-        argv += ["--feedback", arm, "--listen-source", "speaker" if plan.speaker == "sentences" else "speaker:words"]
+        argv += ["--feedback", arm, "--listen-source", SPEAKER_SOURCES[plan.speaker]]
     for o in plan.overrides:
         argv += ["--set", o]
     if arm in ("prosody", "whisper"):

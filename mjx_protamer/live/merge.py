@@ -5,8 +5,8 @@ The sessions of a `reproduce live` run are independent per checkpoint, so a plan
 groups run on different machines (or one after another), each its own `--out`; this pools their per-checkpoint
 rows into the statistics, table and figure one run over all of them would report (live/effect.py's `summarize`).
 Only runs of the same plan pool: the channels, session length, hidden rule (compared as the rule, not the
-config's path), session settings, episodes, learner, snapshots and speaker must match, and no checkpoint may appear twice. What each run was (its command and
-checkpoints) is kept in `merged_from`. A run's sessions take their feedback seed from the checkpoint's place in
+config's path), session settings, episodes, learner, snapshots and speaker must match, and no checkpoint may
+appear twice. What each run was (its command and checkpoints) is kept in `merged_from`. A run's sessions take their feedback seed from the checkpoint's place in
 that run (`feedback.seed=k`), so two runs of five checkpoints reuse seeds 0-4 where one run of ten would have used
 0-9: the pooled result is exactly the runs', not a bit-for-bit copy of that one run.
 """
@@ -68,13 +68,14 @@ def merge_live_effects(runs: list[Path], out: Path, command: str) -> dict:
     check_runs(runs, out)
     summaries = [_load(r) for r in runs]
     first = summaries[0]["plan"]
+    rule = _rule(runs[0], first)
     for run, s in zip(runs[1:], summaries[1:]):
         for key, default in SAME_PLAN.items():
             a, b = first.get(key, default), s["plan"].get(key, default)
             if a != b:
                 raise ConfigError(f"--merge: {run} ran {key}={b!r} but {runs[0]} ran {key}={a!r}; only runs of one "
                                   "plan pool")
-        if _rule(run, s["plan"]) != _rule(runs[0], first):
+        if _rule(run, s["plan"]) != rule:
             raise ConfigError(f"--merge: {run} held another rule than {runs[0]} (rule configs "
                               f"{s['plan'].get('rule_config')} and {first.get('rule_config')}); only runs of one plan "
                               "pool")
@@ -87,7 +88,7 @@ def merge_live_effects(runs: list[Path], out: Path, command: str) -> dict:
                                   "checkpoint may be pooled once")
             seen[ckpt] = run
             rows.append(row)
-    plan = {**first, "rule": _rule(runs[0], first), "checkpoints": [r["checkpoint"] for r in rows], "out": str(out)}
+    plan = {**first, "rule": rule, "checkpoints": [r["checkpoint"] for r in rows], "out": str(out)}
     summary = summarize(plan, rows, command, sum(float(s.get("wall_s") or 0.0) for s in summaries))
     summary["merged_from"] = [{"run": str(r), "command": s.get("command"), "checkpoints": s["plan"].get("checkpoints")}
                               for r, s in zip(runs, summaries)]

@@ -21,7 +21,8 @@ LIVE = ("keyboard", "prosody", "whisper", "web")
 SIMULATED = ("simulated:keyboard", "simulated:prosody", "simulated:speech")
 FEEDBACK_CHOICES = (*LIVE, *SIMULATED, "none")
 LEARNERS = ("ddpg", "coach")
-SPEAKER_SOURCES = ("speaker", "speaker:words")  # the simulated speaker, in sentences or in single words
+# The simulated speaker's --listen-source for what it says praise and reproach in (`reproduce live --speaker`)
+SPEAKER_SOURCES = {"sentences": "speaker", "words": "speaker:words"}
 # A session's feedback config without --config (the channel follows --feedback: the shipped files differ in it
 # alone). Without it a session would run the dataclass defaults: an unbounded reward model, no silences, beta 0.1.
 DEFAULT_FEEDBACK_CONFIG = shipped_config("feedback_keyboard.yaml")
@@ -86,12 +87,12 @@ class SessionSpec:
 
     @property
     def speaker(self) -> bool:
-        return self.voice and self.listen_source in SPEAKER_SOURCES
+        return self.voice and self.listen_source in SPEAKER_SOURCES.values()
 
     @property
     def speaker_says(self) -> str:
         """What the simulated speaker says praise and reproach in: sentences, or single words (speaker:words)."""
-        return "words" if self.listen_source == "speaker:words" else "sentences"
+        return next(says for says, source in SPEAKER_SOURCES.items() if source == self.listen_source)
 
     def ddpg_overrides(self) -> dict:
         """The DDPG values a session takes from its feedback config (the rest is the checkpoint's)."""
@@ -163,7 +164,7 @@ class SessionSpec:
             if self.view != "web":
                 raise ConfigError("feedback.credit.silence_needs_attention counts a silence only while the live "
                                   "page is visible: it needs --view web (or set it false)")
-        if self.voice and not (self.listen_source in ("mic", *SPEAKER_SOURCES)
+        if self.voice and not (self.listen_source in ("mic", *SPEAKER_SOURCES.values())
                                or (self.listen_source.startswith("wav:") and len(self.listen_source) > 4)):
             raise ConfigError(f"--listen-source must be 'mic', 'wav:PATH', 'speaker' or 'speaker:words', got "
                               f"{self.listen_source!r}")
