@@ -17,7 +17,8 @@ import argparse
 from pathlib import Path
 
 from mjx_protamer.human.feedback_config import SESSION_DDPG_KEYS
-from mjx_protamer.live.spec import FEEDBACK_CHOICES, LEARNERS
+from mjx_protamer.live.kinds import LEARNERS
+from mjx_protamer.live.spec import FEEDBACK_CHOICES
 
 
 def register(subparsers) -> None:

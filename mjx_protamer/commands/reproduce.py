@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from mjx_protamer.commands.processes import add_process_flags, processes_of
+from mjx_protamer.live.kinds import LEARNERS
 
 
 def register(subparsers) -> None:
@@ -113,7 +114,7 @@ def register(subparsers) -> None:
                    "second)")
     v.add_argument("--episodes", default=10, help="test episodes per actor (default 10)")
     v.add_argument("--parallel", default=1, help="unpaced sessions at once (default 1)")
-    v.add_argument("--learner", choices=("ddpg", "coach"), default="ddpg",
+    v.add_argument("--learner", choices=LEARNERS, default="ddpg",
                    help="ddpg (default): DDPG + DeepTAMER; coach: Deep COACH from the checkpoint's actor (without "
                    "feedback it does not learn: its no-feedback arm is the start)")
     v.add_argument("--out", type=Path, required=True, help="output directory: new, empty, or one this command wrote "

@@ -120,3 +120,20 @@ def adopt(learner, previous) -> None:
     resumed process restored from that save."""
     learner.set_trees(previous.trees())
     learner.begin_at(previous.first_step)
+
+
+def final_actor(session: Path, learner: str):
+    """The deterministic policy a finished session ended with: DDPG's actor, or the mean of COACH's Gaussian
+    policy (the actor's layers, `live/coach.py`)."""
+    from mjx_protamer.experiments.run_loader import load_run
+    from mjx_protamer.live.kinds import LEARNER_KINDS
+    from mjx_protamer.live.record import read_manifest
+
+    if LEARNER_KINDS[learner].pretrain_run:  # its save is a pretrain run
+        return load_run(session)[2].actor_params
+    manifest = read_manifest(session)
+    spec = SessionSpec.from_manifest(manifest, session)
+    coach = build_learner(spec, load_checkpoint(Path(manifest["checkpoint_step_dir"]), report=lambda line: None),
+                          clock=lambda: 0.0)
+    coach.load_policy(session)
+    return coach.actor_params()

@@ -123,7 +123,12 @@ class CoachSessionLearner(ChunkLearner):
         return None
 
     def status(self) -> dict:
-        return {"events": self.events, "corrections": self.corrections, "updates": self.learner.updates}
+        # the page shows "credited" for every learner: COACH's are its corrections
+        return {"events": self.events, "corrections": self.corrections, "credited": self.corrections,
+                "updates": self.learner.updates}
+
+    def progress(self, pace: dict) -> str:
+        return f"corrections {self.corrections} coach updates {self.learner.updates}"
 
     # ----------------------------------------------------------------- starting points and saving
 

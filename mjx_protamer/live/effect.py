@@ -35,6 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from mjx_protamer.atomic import write_atomic
+from mjx_protamer.live.build import final_actor
+from mjx_protamer.live.kinds import LEARNER_KINDS
 
 METRICS = ("teacher_score", "unique_regions", "freeze_ratio", "contact_rate")
 CHANNELS = ("keyboard", "prosody", "whisper")
@@ -174,25 +176,6 @@ def session_reward_model(session: Path, obs_size: int, action_size: int):
     return model.apply, state.params
 
 
-def final_actor(session: Path, learner: str):
-    """The deterministic policy a session ended with: DDPG's actor, or the mean of COACH's Gaussian policy (the
-    actor's layers, `live/coach.py`)."""
-    from mjx_protamer.experiments.run_loader import load_run
-
-    if learner == "ddpg":
-        return load_run(session)[2].actor_params
-    from mjx_protamer.live.build import build_learner, load_checkpoint
-    from mjx_protamer.live.record import read_manifest
-    from mjx_protamer.live.spec import SessionSpec
-
-    manifest = read_manifest(session)
-    spec = SessionSpec.from_manifest(manifest, session)
-    coach = build_learner(spec, load_checkpoint(Path(manifest["checkpoint_step_dir"]), report=lambda line: None),
-                          clock=lambda: 0.0)
-    coach.load_policy(session)
-    return coach.actor_params()
-
-
 def _session_facts(out: Path) -> dict:
     """What a finished session itself reports: events, updates per shown step, the speaker's delivery."""
     manifest = json.loads((out / "session.json").read_text())
@@ -216,7 +199,7 @@ def run_live_effect(plan: Plan, log=print) -> dict:
     arms = ("none", *plan.channels)
     # Deep COACH learns from corrections alone: without feedback its policy stays the checkpoint's actor, so its
     # no-feedback arm is the start (no session is run for it)
-    ran = arms if plan.learner == "ddpg" else plan.channels
+    ran = arms if LEARNER_KINDS[plan.learner].learns_without_feedback else plan.channels
     jobs = {arm: [] for arm in ran}
     for k, ckpt in enumerate(plan.checkpoints):
         for arm in ran:
@@ -234,7 +217,7 @@ def run_live_effect(plan: Plan, log=print) -> dict:
     for k, ckpt in enumerate(plan.checkpoints):
         score, start, env = scorer(ckpt, plan.rule_config, plan.episodes)
         models = {arm: session_reward_model(plan.out / f"{arm}_{k}", env.observation_size, env.action_size)
-                  if plan.learner == "ddpg" else None for arm in ran}
+                  if LEARNER_KINDS[plan.learner].reward_model else None for arm in ran}
         # the start scored with the no-feedback session's reward model, which took no event (the untrained
         # baseline of r_hat_corr; one evaluator compile per checkpoint)
         row = {"checkpoint": str(ckpt), "start": score(start, models.get("none"))}

@@ -5,8 +5,10 @@ next `chunk_steps` steps of the one watched env and returns them as a `Chunk` st
 shown; `take_events(step)` drains the feedback queue and learns from what it held; `extra_updates(n)` spends
 spare time (DDPG: more updates; COACH learns from corrections only); `save(out)` writes what it has learnt;
 `actor_params()` is the deterministic policy as it stands (a DDPG actor's tree, what a snapshot keeps);
-`status()` is what the terminal, the page and session.json report. DDPG + DeepTAMER (`live/tamer.py`) and
-Deep COACH (`live/coach.py`) implement it; `build_learner` (live/build.py) is the one place that chooses.
+`status()` is what the terminal, the page and session.json report (`progress(pace)` the terminal's line of it,
+`intro(spec)` what the terminal says of the learner before the first chunk). DDPG + DeepTAMER (`live/tamer.py`) and
+Deep COACH (`live/coach.py`) implement it; `build_learner` (live/build.py) is the one place that chooses;
+what code elsewhere must know of a learner is in its traits (live/kinds.py), never its name.
 
 `ChunkLearner` is their shared skeleton: the step clock that maps times to steps, the queue and the feedback
 log, attention events (the page's visibility, which gates silences), and the per-event outcomes a session
@@ -68,6 +70,8 @@ class Learner(Protocol):
     def extra_updates(self, n: int) -> int: ...
     def save(self, out: Path) -> None: ...
     def status(self) -> dict: ...
+    def progress(self, pace: dict) -> str: ...
+    def intro(self, spec) -> list[str]: ...
     def actor_params(self) -> dict: ...
     def predict(self, chunk: Chunk) -> np.ndarray | None: ...
     def close(self) -> None: ...
@@ -94,6 +98,10 @@ class ChunkLearner(abc.ABC):
         self.first_step = 0
         self.events = 0
         self.last_chunk: Chunk | None = None
+
+    def intro(self, spec) -> list[str]:
+        """Lines the session's terminal prints of this learner before the first chunk (none by default)."""
+        return []
 
     def _stamp(self, t0: float) -> tuple[float, np.ndarray]:
         """The chunk's steps on the step clock from `t0`; a chunk computed faster than real time is shown

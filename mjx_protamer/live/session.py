@@ -98,7 +98,7 @@ class Saver:
                     checkpoints.save(mngr, self.next, jax.device_get(tree))
                 finally:
                     mngr.close()
-            if self.learner.kind == "ddpg":  # loadable by `protamer eval --checkpoint OUT` and finetune again
+            if self.spec.kind.pretrain_run:  # loadable by `protamer eval --checkpoint OUT` and finetune again
                 write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(self.learner.config), sort_keys=False))
             write_atomic(out / "feedback_config.yaml", yaml.safe_dump(to_dict(self.spec.config), sort_keys=False))
             if self.recorder is not None:
@@ -134,28 +134,9 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
     sc = spec.config.session
     pacer = UpdatePacer(learner.chunk_steps, learner.dt, sc.chunk_updates_per_step, sc.max_updates_per_step,
                         sc.spare_fraction, sc.unpaced_updates_per_step, paced=spec.pace and spec.live,
-                        updates_per_event=sc.updates_per_event if learner.kind == "ddpg" else 0.0)
-    if learner.kind == "ddpg" and spec.feedback != "none":
-        d = learner.config.ddpg
-        print(f"[finetune] DDPG trains on {d.reward_alpha:g} r_env + {d.reward_beta:g} r_hat"
-              + (f", the actor biased by {d.human_actor_coef:g} r_hat" if d.human_actor_coef else "")
-              + (f" at its own step size {d.human_actor_lr:g}" if d.human_actor_coef and d.human_actor_lr else "")
-              + (f", climbing {d.human_critic_coef:g} x a critic of r_hat alone (gamma {d.human_critic_gamma:g})"
-                 if d.human_critic_coef else "")
-              + (f", imitating praised actions {d.praise_imitation_coef:g}" if d.praise_imitation_coef else "")
-              + (f", avoiding reproached ones {d.reproach_avoid_coef:g}" if d.reproach_avoid_coef else "")
-              + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
-              + (f" until {d.anchor_release_events} events have taught it" if d.anchor_coef
-                 and d.anchor_release_events else "")
-              + (f" (a praise counting {d.anchor_praise_release:g})" if d.anchor_coef and d.anchor_release_events
-                 and d.anchor_praise_release < 1 else "")
-              + (", a praise moving the anchor to the actor it praised" if d.anchor_coef and d.anchor_praise_hold
-                 else "")
-              + f"; feedback config {spec.config_path or 'the built-in defaults'}", flush=True)
-
-    if learner.kind == "ddpg" and not sc.explore:
-        print("[finetune] session.explore false: the infant acts with its deterministic actor (no exploration noise)",
-              flush=True)
+                        updates_per_event=sc.updates_per_event if spec.kind.replay_updates else 0.0)
+    for line in learner.intro(spec):
+        print(f"[finetune] {line}", flush=True)
 
     if getattr(learner, "attention", None) is not None:
         print("[finetune] credit.silence_needs_attention: a silent step teaches 'nothing to say' only while the "
@@ -205,8 +186,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         return _fail(write_error, 1)
     s = learner.status()
     pace = {**result.pace(learner.chunk_steps * learner.dt), "segment": segment, "paced": pacer.paced,
-            "updates_per_step": pacer.updates_per_step() if learner.kind == "ddpg" else None,
-            **(pacer.costs() if pacer.paced and learner.kind == "ddpg" else {})}
+            "updates_per_step": pacer.updates_per_step() if spec.kind.replay_updates else None,
+            **(pacer.costs() if pacer.paced and spec.kind.replay_updates else {})}
     _record_pace(spec.out, pace)
     ups = f", {pace['updates_per_step']:.2f} updates per shown step" if pace["updates_per_step"] is not None else ""
     rt = f", {pace['realtime']:.2f}x real time" if "realtime" in pace else ""

@@ -22,14 +22,9 @@ class TerminalSink:
     """A status line per chunk; each drained event with what became of it."""
 
     def chunk(self, learner, chunk, outcomes, pace: dict) -> None:
-        s = learner.status()
         m = chunk.metrics
-        if learner.kind == "coach":
-            extra = f"corrections {s['corrections']} coach updates {s['updates']}"
-        else:
-            extra = f"credited {s['credited']} r_hat updates {s['r_hat_updates']} updates/step {pace['updates_per_step']:.1f}"
         print(f"[step {learner.first_step:>7}] contact {m['contact_rate']:.2f} reward {m['step_reward']:+.3f} "
-              f"events {s['events']} {extra}", flush=True)
+              f"events {learner.events} {learner.progress(pace)}", flush=True)
         self.outcomes(outcomes)
 
     @staticmethod
@@ -66,8 +61,6 @@ class ViewSink:
         status = {"learner": learner.kind, "feedback": self.spec.feedback,
                   "contact_rate": float(chunk.metrics["contact_rate"]),
                   "step_reward": float(chunk.metrics["step_reward"]), **learner.status(), **pace}
-        if learner.kind == "coach":
-            status["credited"] = status.get("corrections", 0)
         if self.spec.calibrate:
             status["prompt"] = calibration_prompt(self.spec.calibrate)
         self.view.offer({"first_step": int(chunk.first_step), "t0": float(chunk.t0), "dt": float(learner.dt),

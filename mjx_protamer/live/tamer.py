@@ -231,6 +231,35 @@ class TamerLearner(ChunkLearner):
         return {"events": self.events, "credited": self.credited, "updates": self.updates,
                 "r_hat_updates": self.model.updates if self.use_model else 0}
 
+    def progress(self, pace: dict) -> str:
+        s = self.status()
+        return f"credited {s['credited']} r_hat updates {s['r_hat_updates']} updates/step {pace['updates_per_step']:.1f}"
+
+    def intro(self, spec) -> list[str]:
+        """What the session's terminal says of this learner before the first chunk: what DDPG trains on."""
+        lines = []
+        if spec.feedback != "none":
+            d = self.config.ddpg
+            lines.append(
+                f"DDPG trains on {d.reward_alpha:g} r_env + {d.reward_beta:g} r_hat"
+                + (f", the actor biased by {d.human_actor_coef:g} r_hat" if d.human_actor_coef else "")
+                + (f" at its own step size {d.human_actor_lr:g}" if d.human_actor_coef and d.human_actor_lr else "")
+                + (f", climbing {d.human_critic_coef:g} x a critic of r_hat alone (gamma {d.human_critic_gamma:g})"
+                   if d.human_critic_coef else "")
+                + (f", imitating praised actions {d.praise_imitation_coef:g}" if d.praise_imitation_coef else "")
+                + (f", avoiding reproached ones {d.reproach_avoid_coef:g}" if d.reproach_avoid_coef else "")
+                + (f", anchored {d.anchor_coef:g}" if d.anchor_coef else "")
+                + (f" until {d.anchor_release_events} events have taught it" if d.anchor_coef
+                   and d.anchor_release_events else "")
+                + (f" (a praise counting {d.anchor_praise_release:g})" if d.anchor_coef and d.anchor_release_events
+                   and d.anchor_praise_release < 1 else "")
+                + (", a praise moving the anchor to the actor it praised" if d.anchor_coef and d.anchor_praise_hold
+                   else "")
+                + f"; feedback config {spec.config_path or 'the built-in defaults'}")
+        if not self.session.explore:
+            lines.append("session.explore false: the infant acts with its deterministic actor (no exploration noise)")
+        return lines
+
     def trees(self) -> dict:
         """What a save keeps, by directory: the DDPG state (checkpoints/, loadable by `protamer eval` and by
         finetune again) and the reward model (reward_model/)."""

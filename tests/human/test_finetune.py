@@ -8,6 +8,7 @@ import io
 import json
 import os
 import pty
+import re
 import select
 import signal
 import subprocess
@@ -234,6 +235,10 @@ def test_finetune_keyboard_in_a_terminal_confirms_credits_saves_and_loads(toy_ru
     assert "[feedback] +1 accepted" in text and "[feedback] -1 accepted" in text and "credited steps" in text
     assert f"[finetune] saved in {out}: 2 events" in text
     assert "[view] http://127.0.0.1:" in text and "?token=" in text  # the default view without a display
+    # before the first chunk the terminal says what DDPG trains on (the shipped session's learner)
+    assert "[finetune] DDPG trains on 1 r_env + 1 r_hat, the actor biased by 10 r_hat" in text
+    # and each chunk's line what it credited and its pace
+    assert re.search(r"\[step +\d+\] contact .* events \d+ credited \d+ r_hat updates \d+ updates/step", text)
     accepted = FeedbackLog.read(out / "feedback.jsonl")
     assert [e.value for e in accepted] == [1.0, -1.0] and all(e.source == "keyboard" for e in accepted)
     assert reward_model_changed(out)
@@ -298,6 +303,9 @@ def test_coach_learner_learns_from_events_through_the_real_queue(tmp_path):
           f"of {run.events} events, {run.learner.updates} updates")
     assert run.events == 300 and run.corrections > 100 and run.learner.updates == run.corrections
     assert after > before + 0.2
+    # what the terminal and the page show of it: its corrections are what it credited
+    assert run.status()["credited"] == run.corrections
+    assert run.progress({}) == f"corrections {run.corrections} coach updates {run.learner.updates}"
     assert len(FeedbackLog.read(tmp_path / "fb.jsonl")) == 300
 
 
@@ -578,7 +586,7 @@ def test_a_snapshot_is_the_policy_a_session_stopped_there_ends_with(toy_run, tmp
     """`--snapshot-every-s`: the policy saved after 5 of 10 chunks is bit for bit the final policy of the same
     session stopped after 5 chunks, so a curve of snapshots says what sessions of each length would have taught."""
     from mjx_protamer.experiments.checkpoints import load_model
-    from mjx_protamer.live.effect import final_actor
+    from mjx_protamer.live.build import final_actor
     from mjx_protamer.live.sinks import SNAPSHOTS, snapshot_steps
 
     long, short = tmp_path / "long", tmp_path / "short"

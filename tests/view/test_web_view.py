@@ -180,7 +180,7 @@ def test_a_calibration_sessions_snapshot_carries_its_task_and_pace_into_the_page
     from mjx_protamer.view.playback import Player
 
     learner = SimpleNamespace(kind="coach", dt=0.005, predict=lambda chunk: None,
-                              status=lambda: {"events": 3, "corrections": 2, "updates": 7})
+                              status=lambda: {"events": 3, "corrections": 2, "credited": 2, "updates": 7})
     chunk = Chunk(50, 100.0, 100.0 + 0.005 * np.arange(5), np.zeros((5, 3)), np.zeros((5, 2)), np.zeros((5, 1)), None,
                   {"contact_rate": 1.0, "step_reward": 0.5})
     for calibrate, expected in (("head", calibration_prompt("head")), (None, None)):
