@@ -98,7 +98,7 @@ class Saver:
                     checkpoints.save(mngr, self.next, jax.device_get(tree))
                 finally:
                     mngr.close()
-            if self.spec.kind.pretrain_run:  # loadable by `protamer eval --checkpoint OUT` and finetune again
+            if self.spec.learner_kind.pretrain_run:  # loadable by `protamer eval --checkpoint OUT` and finetune again
                 write_atomic(out / "config.yaml", yaml.safe_dump(to_dict(self.learner.config), sort_keys=False))
             write_atomic(out / "feedback_config.yaml", yaml.safe_dump(to_dict(self.spec.config), sort_keys=False))
             if self.recorder is not None:
@@ -134,7 +134,7 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
     sc = spec.config.session
     pacer = UpdatePacer(learner.chunk_steps, learner.dt, sc.chunk_updates_per_step, sc.max_updates_per_step,
                         sc.spare_fraction, sc.unpaced_updates_per_step, paced=spec.pace and spec.live,
-                        updates_per_event=sc.updates_per_event if spec.kind.replay_updates else 0.0)
+                        updates_per_event=sc.updates_per_event if spec.learner_kind.replay_updates else 0.0)
     for line in learner.intro(spec):
         print(f"[finetune] {line}", flush=True)
 
@@ -186,8 +186,8 @@ def _run(spec: SessionSpec, loaded, learner, recorder, clock, saver: Saver, segm
         return _fail(write_error, 1)
     s = learner.status()
     pace = {**result.pace(learner.chunk_steps * learner.dt), "segment": segment, "paced": pacer.paced,
-            "updates_per_step": pacer.updates_per_step() if spec.kind.replay_updates else None,
-            **(pacer.costs() if pacer.paced and spec.kind.replay_updates else {})}
+            "updates_per_step": pacer.updates_per_step() if spec.learner_kind.replay_updates else None,
+            **(pacer.costs() if pacer.paced and spec.learner_kind.replay_updates else {})}
     _record_pace(spec.out, pace)
     ups = f", {pace['updates_per_step']:.2f} updates per shown step" if pace["updates_per_step"] is not None else ""
     rt = f", {pace['realtime']:.2f}x real time" if "realtime" in pace else ""

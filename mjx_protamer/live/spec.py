@@ -78,7 +78,7 @@ class SessionSpec:
         return max(1, round(self.chunk_ms / 1000.0 / self.config.feedback.dt))
 
     @property
-    def kind(self):
+    def learner_kind(self):
         """The learner's traits (live/kinds.py)."""
         return LEARNER_KINDS[self.learner]
 
@@ -161,7 +161,7 @@ class SessionSpec:
                                   "web, whisper, prosody; a simulated teacher reacts to its rule, not to the touch)")
         if self.feedback == "web" and self.view != "web":
             raise ConfigError("--feedback web takes feedback from the live page: it needs --view web")
-        if credit.silence_needs_attention and self.kind.counts_silences and self.feedback != "none":
+        if credit.silence_needs_attention and self.learner_kind.counts_silences and self.feedback != "none":
             if not self.live or self.speaker:
                 raise ConfigError("feedback.credit.silence_needs_attention: simulated teachers report no attention "
                                   "here; set it false (the in-jit teachers of pretrain/reproduce and a live "
@@ -187,16 +187,16 @@ class SessionSpec:
                 "chunk_steps": self.chunk_steps, "config": self.config_path, "overrides": list(self.overrides),
                 "coach_delay_s": self.coach_delay_s,
                 "coach_policy": str(self.coach_policy) if self.coach_policy else None,
-                "coach_init": self.coach_init if self.kind.gaussian_policy else None,
-                "coach_log_std": self.coach_log_std if self.kind.gaussian_policy else None,
+                "coach_init": self.coach_init if self.learner_kind.gaussian_policy else None,
+                "coach_log_std": self.coach_log_std if self.learner_kind.gaussian_policy else None,
                 "seeds": {"feedback": fb.seed}, "feedback_config": to_dict(fb), "run_config": to_dict(self.config),
                 "session_config": to_dict(self.config.session), "listen_source": self.listen_source,
                 "voice_config": self.voice_config, "voice_set": list(self.voice_set),
                 "keywords_only": self.keywords_only, "pace": self.pace, "snapshot_every_s": self.snapshot_every_s,
                 "segments": str(self.save_segments or (self.out / "segments")) if self.voice else None,
                 "calibrate": self.calibrate,
-                "session_ddpg": self.ddpg_overrides() if self.kind.pretrain_run else None,
-                "replay_from_checkpoint": self.kind.pretrain_run and not self.fresh_replay}
+                "session_ddpg": self.ddpg_overrides() if self.learner_kind.pretrain_run else None,
+                "replay_from_checkpoint": self.learner_kind.pretrain_run and not self.fresh_replay}
 
     @classmethod
     def from_manifest(cls, manifest: dict, out: Path, **flags) -> "SessionSpec":
