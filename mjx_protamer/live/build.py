@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from mjx_protamer.live.kinds import LEARNER_KINDS
 from mjx_protamer.live.spec import SessionSpec
 
 
@@ -126,7 +127,6 @@ def final_actor(session: Path, learner: str):
     """The deterministic policy a finished session ended with: DDPG's actor, or the mean of COACH's Gaussian
     policy (the actor's layers, `live/coach.py`)."""
     from mjx_protamer.experiments.run_loader import load_run
-    from mjx_protamer.live.kinds import LEARNER_KINDS
     from mjx_protamer.live.record import read_manifest
 
     if LEARNER_KINDS[learner].pretrain_run:  # its save is a pretrain run
