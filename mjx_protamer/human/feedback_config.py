@@ -29,7 +29,7 @@ from mjx_protamer.human.teachers import TeacherConfig
 # weights alone.)
 SESSION_DDPG_KEYS = ("reward_alpha", "reward_beta", "human_actor_coef", "human_actor_lr", "human_critic_coef",
                      "human_critic_gamma", "anchor_coef", "anchor_release_events", "anchor_praise_release",
-                     "anchor_praise_hold",
+                     "anchor_praise_hold", "noise_follows_hold",
                      "praise_imitation_coef", "reproach_avoid_coef",
                      "actor_lr", "critic_lr")
 

@@ -258,6 +258,9 @@ class TamerLearner(ChunkLearner):
                 + f"; feedback config {spec.config_path or 'the built-in defaults'}")
         if not self.session.explore:
             lines.append("session.explore false: the infant acts with its deterministic actor (no exploration noise)")
+        elif self.config.ddpg.noise_follows_hold:
+            lines.append("noise_follows_hold: the exploration noise scaled by 1 - the hold's weight (none until the "
+                         "person's words let the hold go)")
         return lines
 
     def trees(self) -> dict:

@@ -142,12 +142,14 @@ def test_table2_tour_right_is_the_tour_config_with_a_left_hand_reproach_only():
 
 
 @pytest.mark.parametrize("key,value", [("praise_imitation_coef", "50"), ("reproach_avoid_coef", "50"),
-                                       ("anchor_praise_hold", "true")])
+                                       ("anchor_praise_hold", "true"), ("noise_follows_hold", "true")])
 def test_table2_refuses_a_live_sessions_option_it_cannot_run(key, value):
     """A word as a demonstration reads a live session's feedback ring, and a praise re-anchors the actor on the
-    host; the batched runs have neither, so the key would do nothing there: a one-line error naming it instead of a
-    Table II that silently ignored it."""
+    host; the batched runs have neither, so the key would do nothing there (and noise that follows the hold would
+    keep their envs from exploring at all): a one-line error naming it instead of a Table II that silently ignored
+    it."""
     from mjx_protamer.config import ConfigError
 
     with pytest.raises(ConfigError, match=f"pretrain.ddpg.{key}.*live session"):
-        load_table2_config(None, ["pretrain.ddpg.anchor_coef=50", f"pretrain.ddpg.{key}={value}"])
+        load_table2_config(None, ["pretrain.ddpg.anchor_coef=50", "pretrain.ddpg.anchor_release_events=10",
+                                  f"pretrain.ddpg.{key}={value}"])

@@ -279,3 +279,25 @@ def test_without_exploration_the_person_watches_the_deterministic_actor():
         chunk, _ = run_chunk(learner, clock)
         first[explore] = float(np.abs(chunk.action[0] - np.asarray(learner.trainer.act(params, chunk.obs[0]))).max())
     assert first[False] == 0.0 and first[True] > 0.01, first
+
+
+def test_with_noise_following_the_hold_the_infant_explores_as_far_as_the_words_let_the_hold_go():
+    """`ddpg.noise_follows_hold`: the shown action is the deterministic actor's plus (1 - the hold's weight) x the
+    noise a session without the option adds (the same seed draws the same noise): none while nobody has spoken
+    (weight 1), three quarters of it at weight 0.25. It needs an anchor whose weight the events move."""
+    anchored = ["pretrain.ddpg.noise.sigma=0.3", "pretrain.ddpg.anchor_coef=0.5",
+                "pretrain.ddpg.anchor_release_events=4"]
+    added = {}
+    for follows, weight in ((False, 1.0), (True, 1.0), (True, 0.25)):
+        learner, _, _, clock = toy_learner(anchored + [f"pretrain.ddpg.noise_follows_hold={str(follows).lower()}"])
+        learner.state = learner.state.replace(anchor_weight=jax.device_put(np.float32(weight), jax.devices()[0]))
+        params = jax.tree.map(np.array, learner.state.actor_params)  # the chunk's first step acts before any update
+        chunk, _ = run_chunk(learner, clock)
+        added[follows, weight] = chunk.action[0] - np.asarray(learner.trainer.act(params, chunk.obs[0]))
+        assert np.abs(chunk.action[0]).max() < 1.0  # not clipped: the noise is all there is between the two
+    noise = added[False, 1.0]
+    assert np.abs(noise).max() > 0.01
+    assert np.all(added[True, 1.0] == 0.0)
+    np.testing.assert_allclose(added[True, 0.25], 0.75 * noise, atol=1e-5)
+    with pytest.raises(ConfigError, match="noise_follows_hold"):
+        toy_learner(["pretrain.ddpg.noise_follows_hold=true", "pretrain.ddpg.anchor_coef=0.5"])

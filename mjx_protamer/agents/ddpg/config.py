@@ -102,6 +102,12 @@ class DDPGConfig:
     # session has moved it. A session nobody speaks to keeps the checkpoint's anchor; with a praise that gives weight
     # back, one the person is pleased with keeps what pleased them and one mostly reproached learns.
     anchor_praise_hold: bool = False
+    # The infant explores as far as the person's words have let the hold go (False: off): the exploration noise is
+    # scaled by 1 - the anchor's weight. Nobody has spoken: the person sees the deterministic actor, the one a test
+    # runs and a praise holds; reproach lets the hold go and the noise come back, so a checkpoint doing the wrong
+    # thing shows the person alternatives to praise, and praise (with `anchor_praise_release` below 0) quiets it
+    # again. Needs the anchor and events that move its weight (`anchor_coef`, `anchor_release_events` > 0).
+    noise_follows_hold: bool = False
     # Praise as a demonstration (0: off): the actor is also pulled toward the actions the person praised, weighing
     # `praise_imitation_coef * |mu(s) - a|^2` over (s, a) rows the session's feedback ring credited to praise
     # (drawn in proportion to weight x value). Action biasing follows r_hat's gradient wherever it points; this
@@ -145,6 +151,9 @@ class DDPGConfig:
               f"got {self.anchor_praise_release}")
         check(not self.anchor_praise_hold or self.anchor_coef > 0, "anchor_praise_hold",
               "needs anchor_coef > 0 (a praise holds the actor through the anchor's pull)")
+        check(not self.noise_follows_hold or (self.anchor_coef > 0 and self.anchor_release_events > 0),
+              "noise_follows_hold", "needs anchor_coef > 0 and anchor_release_events > 0 (the noise follows the "
+              "anchor's weight, which only the person's events move)")
         check(self.praise_imitation_coef >= 0.0, "praise_imitation_coef",
               f"must be >= 0 (0: praise is not imitated), got {self.praise_imitation_coef}")
         check(self.reproach_avoid_coef >= 0.0, "reproach_avoid_coef",

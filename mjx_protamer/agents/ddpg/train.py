@@ -346,7 +346,9 @@ def make_train(config, env, human_reward_fn: HumanRewardFn | None = None, device
         noise_state = noise.step(dc.noise, ts.noise_state, local_key(k_noise))
         first = jax.lax.axis_index(axis) * local_envs if sharded else 0
         noisy = noisy_envs_at(first + jnp.arange(local_envs), ts.iteration, tc.num_envs, dc.noise)[:, None]
-        explore = jnp.clip(actor.apply(ts.actor_params, obs) + jnp.where(noisy, noise_state, 0.0), -1.0, 1.0)
+        # a live session's option (`noise_follows_hold`): as much noise as the person's words have let the hold go
+        added = (1.0 - ts.anchor_weight) * noise_state if dc.noise_follows_hold else noise_state
+        explore = jnp.clip(actor.apply(ts.actor_params, obs) + jnp.where(noisy, added, 0.0), -1.0, 1.0)
         uniform = jax.random.uniform(local_key(k_random), explore.shape, minval=-1.0, maxval=1.0)
         action = jnp.where(ts.iteration < warmup_iterations, uniform, explore)
 

@@ -55,6 +55,9 @@ class Table2Config(FeedbackRunConfig):
         check(not d.anchor_praise_hold, "pretrain.ddpg.anchor_praise_hold",
               "is a live session's option (finetune, reproduce live): table2's batched runs take no praise on the "
               "host to hold the actor by; set it to false")
+        check(not d.noise_follows_hold, "pretrain.ddpg.noise_follows_hold",
+              "is a live session's option (finetune, reproduce live): table2's batched runs take no events on the "
+              "host to let the hold go by, so their envs would never explore; set it to false")
 
 
 # What `reproduce table2` runs without --config (a file shipped with the package, `config.shipped_config`): the
