@@ -19,7 +19,7 @@ model, which took no event, is the baseline): whether the events taught the mode
 followed it. With `snapshot_minutes`, every session also saves its policy at each multiple of it
 (`finetune --snapshot-every-s`), and each snapshot is scored the same way: the paired difference minute by minute
 (`curve` in the JSON, live_curve.png), what a session of each length would have ended with. Finished sessions
-are kept: `--resume` continues.
+are kept, the same command continues, and each kept one must be this plan's (`_check_kept`).
 """
 
 from __future__ import annotations
@@ -98,7 +98,67 @@ def _unpaced_ups(plan: Plan) -> float:
     return load_feedback_config(DEFAULT_FEEDBACK_CONFIG, list(plan.overrides)).session.unpaced_updates_per_step
 
 
-def _run_session(argv: list[str], out: Path, log=print) -> float:
+def session_identity(argv: list[str], arm: str) -> list[str]:
+    """What a session's argv says it runs, apart from where: without the interpreter (a venv's path differs by
+    machine) and with its own directory as `<session>`. A no-feedback session takes no event, so the teacher's
+    rule plays no part in it and is left out: its sessions serve plans that differ only in the rule."""
+    args = list(argv[3:])  # after `python -m mjx_protamer.cli`
+    args[args.index("--out") + 1] = "<session>"
+    if arm == "none":
+        k = next(i for i, a in enumerate(args) if a.startswith("feedback.teacher.rule="))
+        del args[k - 1:k + 1]
+    return args
+
+
+def _check_kept(argv: list[str], arm: str, out: Path) -> None:
+    """Refuse a finished session in `out` that another plan ran (other checkpoint, arm or settings), before any
+    session starts: kept sessions are pooled with new ones, so one from another plan would silently mix into the
+    result. Sessions finished before DONE recorded their argv are checked by checkpoint and feedback only."""
+    from mjx_protamer.config import ConfigError
+
+    if not (out / DONE).is_file():
+        return
+    want = session_identity(argv, arm)
+    try:
+        ran = json.loads((out / DONE).read_text(encoding="utf-8"))["argv"]
+    except (ValueError, TypeError, KeyError, OSError):
+        ran = None
+    if ran is None:  # an older session: what its session.json says it ran
+        try:
+            facts = json.loads((out / "session.json").read_text(encoding="utf-8"))
+            ran_pairs = {"--checkpoint": str(facts["checkpoint"]), "--feedback": str(facts["feedback"])}
+        except (ValueError, KeyError, OSError):
+            raise ConfigError(f"{out} holds a finished session whose session.json cannot be read; remove {out} "
+                              "to run it again, or give a new --out") from None
+        planned = {"--checkpoint": str(Path(want[want.index("--checkpoint") + 1]).absolute()),  # as recorded
+                   "--feedback": want[want.index("--feedback") + 1]}
+        diff = [(f"{flag} {v}", f"{flag} {planned[flag]}") for flag, v in ran_pairs.items() if v != planned[flag]]
+    else:
+        diff = _first_difference(ran, want)
+    if diff:
+        theirs, ours = diff[0]
+        raise ConfigError(f"{out} holds a session another plan ran ({theirs}; this plan: {ours}); give a new --out, "
+                          f"or remove {out} to run it with this plan")
+
+
+def _first_difference(ran: list[str], want: list[str]) -> list[tuple[str, str]]:
+    """[(what `ran` has, what `want` has)] at the first place two session argvs differ, the flags that say which
+    session it is first (a long rule or setting is named only when those agree); [] when they are equal."""
+    import difflib
+
+    def value(args, flag):
+        return f"{flag} {args[args.index(flag) + 1]}" if flag in args else f"no {flag}"
+
+    for flag in ("--checkpoint", "--feedback", "--learner", "--listen-source"):
+        if value(ran, flag) != value(want, flag):
+            return [(value(ran, flag), value(want, flag))]
+    for tag, i1, i2, j1, j2 in difflib.SequenceMatcher(None, ran, want, autojunk=False).get_opcodes():
+        if tag != "equal":
+            return [(" ".join(ran[i1:i2]) or "nothing there", " ".join(want[j1:j2]) or "nothing there")]
+    return []
+
+
+def _run_session(argv: list[str], out: Path, arm: str, log=print) -> float:
     """One session into `out` (kept when it finished before); its wall time (s)."""
     if (out / DONE).is_file():
         return float("nan")
@@ -112,7 +172,7 @@ def _run_session(argv: list[str], out: Path, log=print) -> float:
         code = subprocess.run(argv, stdout=fh, stderr=subprocess.STDOUT).returncode
     if code != 0:
         raise RuntimeError(f"the session in {out} failed (exit {code}); see {out.with_suffix('.log')}")
-    (out / DONE).write_text("ok")
+    write_atomic(out / DONE, json.dumps({"argv": session_identity(argv, arm)}))
     wall = time.perf_counter() - t0
     log(f"[live] {out.name}: {wall:.0f} s")
     return wall
@@ -205,14 +265,17 @@ def run_live_effect(plan: Plan, log=print) -> dict:
         for arm in ran:
             d = plan.out / f"{arm}_{k}"
             jobs[arm].append((_session_argv(plan, ckpt, arm, k, d), d))
-    unpaced = [j for arm in ran if arm in ("none", "keyboard") for j in jobs[arm]]
+    for arm in ran:
+        for argv, d in jobs[arm]:
+            _check_kept(argv, arm, d)
+    unpaced = [(arm, *j) for arm in ran if arm in ("none", "keyboard") for j in jobs[arm]]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max(1, plan.parallel)) as ex:
-        list(ex.map(lambda j: _run_session(j[0], j[1], log), unpaced))
+        list(ex.map(lambda j: _run_session(j[1], j[2], j[0], log), unpaced))
     for arm in ran:
         if arm in ("prosody", "whisper"):
             for argv, d in jobs[arm]:
-                _run_session(argv, d, log)
+                _run_session(argv, d, arm, log)
     rows = []
     for k, ckpt in enumerate(plan.checkpoints):
         score, start, env = scorer(ckpt, plan.rule_config, plan.episodes)
