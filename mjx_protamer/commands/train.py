@@ -105,6 +105,7 @@ def _pretrain(args: argparse.Namespace) -> int:
         config = from_dict(PretrainConfig, apply_overrides(to_dict(PretrainConfig()), overrides))
     else:
         config = load_config(PretrainConfig, args.config, overrides)
+    config.ddpg.check_batched("a pretrain run (batched)", "ddpg.")
     out = args.out or Path("runs") / time.strftime("pretrain-%Y%m%d-%H%M%S")
     if seeds is not None:
         return _pretrain_seeds(config, out, seeds, spec, args.resume, not args.no_progress, feedback)

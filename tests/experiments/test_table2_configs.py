@@ -153,3 +153,16 @@ def test_table2_refuses_a_live_sessions_option_it_cannot_run(key, value):
     with pytest.raises(ConfigError, match=f"pretrain.ddpg.{key}.*live session"):
         load_table2_config(None, ["pretrain.ddpg.anchor_coef=50", "pretrain.ddpg.anchor_release_events=10",
                                   f"pretrain.ddpg.{key}={value}"])
+
+
+@pytest.mark.parametrize("key,value", [("praise_imitation_coef", "50"), ("noise_follows_hold", "true")])
+def test_pretrain_refuses_a_live_sessions_option_in_one_line_before_anything_starts(tmp_path, capsys, key, value):
+    """The same keys in `protamer pretrain` (one check for both batched commands): noise that follows a hold no
+    event moves would train a run that never explores."""
+    from mjx_protamer.cli import main
+
+    code = main(["pretrain", "--set", "ddpg.anchor_coef=50", "--set", "ddpg.anchor_release_events=10", "--set",
+                 f"ddpg.{key}={value}", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and f"'ddpg.{key}'" in err[0] and "live session's option" in err[0], err
+    assert not (tmp_path / "out").exists()

@@ -56,7 +56,8 @@ def test_a_kept_session_of_another_plan_is_refused_before_anything_runs(tmp_path
     _finished(plan, a, "prosody", 0, out / "prosody_0")
     _check_kept(_session_argv(plan, a, "prosody", 0, out / "prosody_0"), "prosody", out / "prosody_0")  # its own plan
     # the same directory under a plan whose first checkpoint is another, or with another setting
-    with pytest.raises(ConfigError, match=r"prosody_0 holds a session another plan ran \(.*seed_15; this plan: .*seed_25\)"):
+    with pytest.raises(ConfigError,
+                       match=r"prosody_0 holds a session another plan ran \(.*seed_15; this plan: .*seed_25\)"):
         _check_kept(_session_argv(plan, b, "prosody", 0, out / "prosody_0"), "prosody", out / "prosody_0")
     other = Plan((a,), out, ("prosody",), overrides=("pretrain.ddpg.anchor_praise_hold=false",))
     with pytest.raises(ConfigError, match="anchor_praise_hold=true; this plan: pretrain.ddpg.anchor_praise_hold=false"):

@@ -111,8 +111,9 @@ class DDPGConfig:
     # Praise as a demonstration (0: off): the actor is also pulled toward the actions the person praised, weighing
     # `praise_imitation_coef * |mu(s) - a|^2` over (s, a) rows the session's feedback ring credited to praise
     # (drawn in proportion to weight x value). Action biasing follows r_hat's gradient wherever it points; this
-    # says "keep doing what you did when I said good". Needs a live session's ring (live/tamer.py; table2 refuses
-    # it). Measured at a voice's rate and not shipped (docs/human_feedback.md, "A word as a demonstration").
+    # says "keep doing what you did when I said good". Needs a live session's ring (live/tamer.py; table2 and
+    # pretrain refuse it). Measured at a voice's rate and not shipped (docs/human_feedback.md, "A word as a
+    # demonstration").
     praise_imitation_coef: float = 0.0
     # Reproach as a counter-demonstration (0: off): `reproach_avoid_coef * max(0, 1 - |mu(s) - a|^2)` over the rows
     # the person reproached, a push away from what was done there until the action differs by 1 (squared, over
@@ -162,6 +163,21 @@ class DDPGConfig:
               f"must be >= 0 (0: the anchor never lets go), got {self.anchor_release_events}")
         check(self.replay_size >= self.batch_size, "replay_size",
               f"must be >= batch_size ({self.batch_size}), got {self.replay_size}")
+
+    def check_batched(self, run: str, prefix: str) -> None:
+        """Refuse the options only a live session can act on, for a batched `run` (`protamer pretrain`, `reproduce
+        table2`; `prefix`: where this section sits in its config): they read what the person said on the host,
+        which a batched run has not."""
+        for key in ("praise_imitation_coef", "reproach_avoid_coef"):  # they read a live session's feedback ring
+            check(getattr(self, key) == 0, f"{prefix}{key}",
+                  f"is a live session's option (finetune, reproduce live): {run} has no session ring to draw the "
+                  "person's words from; set it to 0")
+        check(not self.anchor_praise_hold, f"{prefix}anchor_praise_hold",
+              f"is a live session's option (finetune, reproduce live): {run} takes no praise on the host to hold "
+              "the actor by; set it to false")
+        check(not self.noise_follows_hold, f"{prefix}noise_follows_hold",
+              f"is a live session's option (finetune, reproduce live): {run} takes no events on the host to let "
+              "the hold go by, so its envs would never explore; set it to false")
 
 
 @dataclass(frozen=True)

@@ -47,17 +47,7 @@ class Table2Config(FeedbackRunConfig):
         for i, seed in enumerate(self.seeds):
             check_seed(seed, f"seeds[{i}]")
         check(self.moving_average >= 1, "moving_average", f"must be >= 1, got {self.moving_average}")
-        d = self.pretrain.ddpg
-        for key in ("praise_imitation_coef", "reproach_avoid_coef"):  # they read a live session's feedback ring
-            check(getattr(d, key) == 0, f"pretrain.ddpg.{key}",
-                  "is a live session's option (finetune, reproduce live): table2's batched runs have no session "
-                  "ring to draw the person's words from; set it to 0")
-        check(not d.anchor_praise_hold, "pretrain.ddpg.anchor_praise_hold",
-              "is a live session's option (finetune, reproduce live): table2's batched runs take no praise on the "
-              "host to hold the actor by; set it to false")
-        check(not d.noise_follows_hold, "pretrain.ddpg.noise_follows_hold",
-              "is a live session's option (finetune, reproduce live): table2's batched runs take no events on the "
-              "host to let the hold go by, so their envs would never explore; set it to false")
+        self.pretrain.ddpg.check_batched("a table2 run (batched)", "pretrain.ddpg.")
 
 
 # What `reproduce table2` runs without --config (a file shipped with the package, `config.shipped_config`): the
