@@ -132,18 +132,19 @@ def _check_kept(argv: list[str], arm: str, out: Path) -> None:
                               "to run it again, or give a new --out") from None
         planned = {"--checkpoint": str(Path(want[want.index("--checkpoint") + 1]).absolute()),  # as recorded
                    "--feedback": want[want.index("--feedback") + 1]}
-        diff = [(f"{flag} {v}", f"{flag} {planned[flag]}") for flag, v in ran_pairs.items() if v != planned[flag]]
+        diff = next(((f"{flag} {v}", f"{flag} {planned[flag]}") for flag, v in ran_pairs.items()
+                     if v != planned[flag]), None)
     else:
         diff = _first_difference(ran, want)
-    if diff:
-        theirs, ours = diff[0]
+    if diff is not None:
+        theirs, ours = diff
         raise ConfigError(f"{out} holds a session another plan ran ({theirs}; this plan: {ours}); give a new --out, "
                           f"or remove {out} to run it with this plan")
 
 
-def _first_difference(ran: list[str], want: list[str]) -> list[tuple[str, str]]:
-    """[(what `ran` has, what `want` has)] at the first place two session argvs differ, the flags that say which
-    session it is first (a long rule or setting is named only when those agree); [] when they are equal."""
+def _first_difference(ran: list[str], want: list[str]) -> tuple[str, str] | None:
+    """(what `ran` has, what `want` has) at the first place two session argvs differ, the flags that say which
+    session it is first (a long rule or setting is named only when those agree); None when they are equal."""
     import difflib
 
     def value(args, flag):
@@ -151,11 +152,11 @@ def _first_difference(ran: list[str], want: list[str]) -> list[tuple[str, str]]:
 
     for flag in ("--checkpoint", "--feedback", "--learner", "--listen-source"):
         if value(ran, flag) != value(want, flag):
-            return [(value(ran, flag), value(want, flag))]
+            return value(ran, flag), value(want, flag)
     for tag, i1, i2, j1, j2 in difflib.SequenceMatcher(None, ran, want, autojunk=False).get_opcodes():
         if tag != "equal":
-            return [(" ".join(ran[i1:i2]) or "nothing there", " ".join(want[j1:j2]) or "nothing there")]
-    return []
+            return " ".join(ran[i1:i2]) or "nothing there", " ".join(want[j1:j2]) or "nothing there"
+    return None
 
 
 def _run_session(argv: list[str], out: Path, arm: str, log=print) -> float:
